@@ -1,0 +1,248 @@
+"""What the four scripts share: their flags, input checks, and one-line errors with exit code 2.
+
+The flags keep the original names and defaults (upstream spec §1); new ones use the same
+snake_case style. Every error a user can cause ends in one line naming the problem and what would
+be valid, exit code 2, and nothing created or overwritten.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import secrets
+import sys
+from pathlib import Path
+
+import numpy as np
+
+import envs
+from envs import ProblemSpec
+from es.files import FileFormatError
+from es.run import Run, TrainConfig, UserError, new_run_dir
+from policies import DISTRIBUTIONS, INIT_CHOICES, RULES
+
+USER_ERRORS = (UserError, FileFormatError, envs.EnvironmentError_)
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse whose errors are one line and exit code 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {text}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    value = float(text)
+    if not value > 0 or not np.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a number > 0, got {text}")
+    return value
+
+
+def threads_value(text: str) -> int:
+    value = int(text)
+    if value == 0 or value < -1:
+        raise argparse.ArgumentTypeError(f"must be -1 (all cores) or a number of workers >= 1, got {text}")
+    return value
+
+
+def flag_value(text: str | None) -> bool:
+    """``--render`` alone, or the original's ``--render True`` / ``--render False``."""
+    if text is None:
+        return True
+    lowered = text.strip().lower()
+    if lowered in ("1", "true", "yes", "on"):
+        return True
+    if lowered in ("0", "false", "no", "off", ""):
+        return False
+    raise argparse.ArgumentTypeError(f"expected true or false, got {text!r}")
+
+
+# --- training -----------------------------------------------------------------------------------
+
+
+def training_parser(prog: str, description: str, folder: str) -> Parser:
+    parser = Parser(prog=prog, description=description,
+                    formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    add = parser.add_argument
+    add("--environment", default="CarRacing-v0", metavar="ID",
+        help="Gymnasium, pyBullet or MuJoCo id, or module:Id for a custom environment; several ids "
+             "separated by commas are trained together (fitness = mean over them)")
+    add("--popsize", type=int, default=200, metavar="N", help="population size (even: mirrored pairs)")
+    add("--print_every", type=positive_int, default=1, metavar="K", help="save files every K generations")
+    add("--lr", type=positive_float, default=0.2, help="ES learning rate")
+    add("--decay", type=positive_float, default=0.995, help="learning-rate decay per generation")
+    add("--sigma", type=positive_float, default=0.1, help="initial noise standard deviation")
+    add("--generations", type=positive_int, default=300, metavar="G",
+        help="number of generations (with --resume: the total, counting those already run)")
+    add("--folder", default=folder, metavar="DIR", help="where run folders are created")
+    add("--threads", type=threads_value, default=-1, metavar="W",
+        help="worker processes; -1 = all cores, 1 = run in this process")
+    add("--seed", type=int, default=None, help="seed of the run (default: a random one, printed and saved)")
+    add("--episodes", type=positive_int, default=1, metavar="E",
+        help="episodes per fitness evaluation (the fitness is their mean)")
+    add("--resume", default=None, metavar="RUN_DIR", help="continue the run saved in RUN_DIR")
+    add("--backend", choices=("process",), default="process", help="parallel backend for --threads > 1")
+    return parser
+
+
+def resolve_environments(text: str) -> list[str]:
+    ids = [part.strip() for part in text.split(",") if part.strip()]
+    if not ids:
+        raise UserError("--environment is empty; give an id such as CartPole-v1")
+    return [envs.resolve_env_id(env_id) for env_id in ids]
+
+
+def population_size(requested: int) -> int:
+    if requested < 2:
+        raise UserError(f"--popsize must be at least 2 (one mirrored pair), got {requested}")
+    if requested % 2:
+        print(f"note: --popsize {requested} is odd; mirrored sampling needs pairs, using {requested + 1}")
+        return requested + 1
+    return requested
+
+
+def config_from_args(kind: str, args: argparse.Namespace) -> TrainConfig:
+    seed = args.seed if args.seed is not None else secrets.randbelow(2**31)
+    hebbian = {key: getattr(args, key) for key in ("hebb_rule", "init_weights", "distribution") if hasattr(args, key)}
+    return TrainConfig(kind=kind, environment=args.environment, env_ids=resolve_environments(args.environment),
+                       popsize=population_size(args.popsize), lr=args.lr, decay=args.decay, sigma=args.sigma,
+                       generations=args.generations, print_every=args.print_every, folder=args.folder,
+                       threads=args.threads, seed=seed, episodes=args.episodes, backend=args.backend, **hebbian)
+
+
+def config_for_resume(kind: str, args: argparse.Namespace, argv: list[str]) -> tuple[TrainConfig, Path]:
+    from es.files import read_json
+
+    run_dir = Path(args.resume)
+    if not (run_dir / "config.json").is_file() or not (run_dir / "checkpoint.npz").is_file():
+        raise UserError(f"--resume {run_dir}: not a run folder (needs config.json and checkpoint.npz)")
+    try:
+        config = TrainConfig.from_dict(read_json(run_dir / "config.json"))
+    except (ValueError, TypeError) as error:
+        raise UserError(f"--resume {run_dir}: unreadable config.json ({error})") from None
+    if config.kind != kind:
+        script = "train_hebb.py" if config.kind == "hebbian" else "train_static.py"
+        raise UserError(f"--resume {run_dir}: this is a {config.kind} run; resume it with {script}")
+    given = {item.split("=")[0] for item in argv if item.startswith("--")}
+    for name in ("generations", "threads", "backend", "print_every"):  # what a resume may change
+        if f"--{name}" in given:
+            setattr(config, name, getattr(args, name))
+    return config, run_dir
+
+
+def check_writable(folder: str) -> None:
+    path = Path(folder)
+    existing = next((parent for parent in (path, *path.parents) if parent.exists()), Path("."))
+    if not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK):
+        raise UserError(f"--folder {folder}: {existing} is not a writable folder")
+
+
+def train_main(kind: str, parser: Parser, argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    args = parser.parse_args(argv)
+    run = None
+    try:
+        if args.resume:
+            config, run_dir = config_for_resume(kind, args, argv)
+        else:
+            config, run_dir = config_from_args(kind, args), None
+            check_writable(config.folder)
+        spec = ProblemSpec(tuple(config.env_ids), kind, config.hebb_rule, config.init_weights)
+        try:
+            run = Run(config, spec, run_dir or Path("."), log=_log)
+        except ValueError as error:  # incompatible environments, bad network, ...
+            raise UserError(str(error)) from None
+        if run_dir is None:
+            try:
+                run.run_dir = new_run_dir(config.folder, config.env_label, config.seed)
+            except OSError as error:
+                raise UserError(f"--folder {config.folder}: {error.strerror or error}") from None
+            run.write_config([parser.prog, *argv])
+        else:
+            run.load_checkpoint()
+            _log(f"resuming {run_dir} at generation {run.state.generation} of {config.generations}")
+        _log(f"run folder: {run.run_dir} | environment: {', '.join(config.env_ids)} | parameters: {run.dim} "
+             f"| workers: {run.evaluator.workers} | seed: {config.seed}")
+        return run.train()
+    except USER_ERRORS as error:
+        print(f"{parser.prog}: error: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"{parser.prog}: stopped at once; saved files are intact", file=sys.stderr)
+        return 130
+    finally:
+        if run is not None:
+            run.close()
+
+
+# --- evaluation ---------------------------------------------------------------------------------
+
+
+def evaluation_parser(prog: str, description: str) -> Parser:
+    parser = Parser(prog=prog, description=description,
+                    formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    add = parser.add_argument
+    add("--environment", default="CarRacing-v0", metavar="ID",
+        help="environment id; several ids separated by commas give one row each")
+    add("--episodes", type=positive_int, default=1, metavar="N", help="episodes per environment")
+    add("--seed", type=int, default=0, help="seed of the first episode; episode i uses seed + i")
+    add("--render", type=flag_value, nargs="?", const=True, default=False, metavar="BOOL",
+        help="show the episodes in a window (needs a display)")
+    add("--video", default=None, metavar="PATH", help="write the first episode to this mp4 file")
+    return parser
+
+
+def evaluate_main(kind: str, parser: Parser, argv: list[str] | None, load_arrays) -> int:
+    """Shared body of the evaluate scripts; ``load_arrays(args)`` reads the weight files."""
+    from envs.evaluation import evaluate, record_first_episode, write_video
+
+    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    problem = None
+    try:
+        env_ids = resolve_environments(args.environment)
+        arrays = load_arrays(args)
+        spec = ProblemSpec(tuple(env_ids), kind, getattr(args, "hebb_rule", "ABCD_lr"),
+                           getattr(args, "init_weights", "uni"))
+        render_mode = "human" if args.render else ("rgb_array" if args.video else None)
+        try:
+            problem = spec.build(render_mode)
+            params = problem.policy.load(arrays)
+        except ValueError as error:
+            raise UserError(str(error)) from None
+        recorder = record_first_episode(problem) if args.video else None
+
+        def show(env_id, episode, seed, result):
+            print(f"{env_id} | episode {episode + 1} | seed {seed} | return {result.total_return:.2f} "
+                  f"| steps {result.steps}", flush=True)
+
+        reports = evaluate(problem, params, args.episodes, args.seed, on_episode=show)
+        for report in reports:
+            print(f"{report.env_id}: mean return {report.mean:.2f} +- {report.std:.2f} "
+                  f"over {len(report.returns)} episodes")
+        if recorder is not None:
+            fps = int(problem.envs[0].metadata.get("render_fps") or 30)
+            write_video(args.video, recorder.frames, fps)
+            print(f"video of the first episode: {args.video}")
+        return 0
+    except USER_ERRORS as error:
+        print(f"{parser.prog}: error: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+    finally:
+        if problem is not None:
+            problem.close()
+
+
+def _log(line: str) -> None:
+    print(line, flush=True)
+
+
+__all__ = ["DISTRIBUTIONS", "INIT_CHOICES", "RULES", "Parser", "flag_value", "train_main", "training_parser"]

@@ -1,0 +1,28 @@
+"""Environments: construction, per-family recipes, wrappers, damaged morphologies, the rollout.
+
+Importing this package sets headless defaults (no display is ever needed) unless the user set
+them, and registers the pyBullet environments with Gymnasium.
+"""
+
+import os
+
+if not os.environ.get("DISPLAY"):
+    os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+    os.environ.setdefault("MUJOCO_GL", "egl")
+
+import gymnasium as gym  # noqa: E402
+
+from envs.make import EnvironmentError_, make_env, quiet_output, resolve_env_id  # noqa: E402
+from envs.problem import Problem, ProblemSpec  # noqa: E402
+from envs.recipes import Recipe, recipe_for, register_recipe  # noqa: E402
+from envs.rollout import Episode, episode_rng, rollout  # noqa: E402
+
+gym.logger.min_level = 40  # errors only, as the original (gym.logger.set_level(40))
+with quiet_output():
+    try:
+        import pybullet_envs_gymnasium  # noqa: E402,F401  (registers *BulletEnv-v0)
+    except ImportError:  # pyBullet is optional for users who only need Gymnasium/MuJoCo
+        pass
+
+__all__ = ["EnvironmentError_", "Episode", "Problem", "ProblemSpec", "Recipe", "episode_rng",
+           "make_env", "quiet_output", "recipe_for", "register_recipe", "resolve_env_id", "rollout"]

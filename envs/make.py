@@ -1,0 +1,103 @@
+"""Environment construction: id resolution, aliases of retired ids, the family recipe, warm-up.
+
+``make_env`` is the only place an environment is created, for training, evaluation, benchmarks
+and tests alike.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import difflib
+import importlib
+import os
+import sys
+
+import gymnasium as gym
+from gymnasium.envs.registration import parse_env_id
+
+from envs.recipes import Recipe, recipe_for
+
+
+class EnvironmentError_(ValueError):
+    """An environment id that cannot be made; the message names close matches."""
+
+
+def _usable(spec) -> bool:
+    # Gymnasium keeps the mujoco-py based v2/v3 ids registered, with an entry point that raises.
+    entry = spec.entry_point
+    return not (callable(entry) and getattr(entry, "__name__", "").startswith("_raise"))
+
+
+def resolve_env_id(env_id: str, notify=print) -> str:
+    """The registered id to make for ``env_id``; retired versions map to the newest one.
+
+    ``module:EnvId`` imports ``module`` first (Gymnasium's form for custom environments).
+    """
+    if ":" in env_id:
+        module, _, rest = env_id.partition(":")
+        try:
+            importlib.import_module(module)
+        except ImportError as error:
+            raise EnvironmentError_(f"cannot import {module!r} for environment {env_id!r}: {error}") from None
+        env_id = rest
+    registry = gym.registry
+    if env_id in registry and _usable(registry[env_id]):
+        return env_id
+    try:
+        namespace, name, _ = parse_env_id(env_id)
+    except gym.error.Error:
+        namespace, name = None, None
+    versions = [spec for spec in registry.values()
+                if spec.namespace == namespace and spec.name == name and _usable(spec)]
+    if versions:
+        newest = max(versions, key=lambda spec: spec.version or 0).id
+        notify(f"note: {env_id} is retired in Gymnasium {gym.__version__}; using {newest}")
+        return newest
+    known = [spec_id for spec_id, spec in registry.items() if _usable(spec)]
+    close = difflib.get_close_matches(env_id, known, n=5, cutoff=0.5)
+    hint = f"; did you mean {', '.join(close)}?" if close else "; see gymnasium.pprint_registry()"
+    raise EnvironmentError_(f"unknown environment {env_id!r}{hint}")
+
+
+@contextlib.contextmanager
+def quiet_output():
+    """Silence C-level prints to fds 1 and 2 (pyBullet's build banner and 'argv[0]=' lines).
+
+    Python exceptions still propagate; only text written by C code meanwhile is dropped.
+    """
+    streams = [sys.stdout, sys.stderr]
+    try:
+        fds = [stream.fileno() for stream in streams]
+    except (AttributeError, OSError, ValueError):  # captured streams (pytest): nothing to silence
+        yield
+        return
+    for stream in streams:
+        stream.flush()
+    saved = [os.dup(fd) for fd in fds]
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        for fd in fds:
+            os.dup2(devnull, fd)
+        yield
+    finally:
+        ctypes.CDLL(None).fflush(None)
+        for fd, copy in zip(fds, saved):
+            os.dup2(copy, fd)
+            os.close(copy)
+        os.close(devnull)
+
+
+def make_env(env_id: str, render_mode: str | None = None) -> tuple[gym.Env, Recipe]:
+    """Make a registered (already resolved) id, wrapped by its family's recipe, warmed up.
+
+    The warm-up reset matters for pyBullet: its first reset loads the model and later ones restore
+    a saved state, which gives slightly different trajectories. After the warm-up every episode,
+    on whichever worker, starts the same way.
+    """
+    with quiet_output():
+        env = gym.make(env_id, render_mode=render_mode)
+        recipe = recipe_for(env)
+        env = recipe.wrap(env)
+        env.reset(seed=0)
+    return env, recipe

@@ -1,0 +1,120 @@
+"""Per-family environment behaviour of the original code, as data (upstream spec §4.3, §5).
+
+The original chose behaviour with string tests on exact ids inside the episode loop
+(``environment == 'CarRacing-v0'``, ``environment[-12:-6] == 'Bullet'``), so a renamed or custom
+environment silently lost it. Here an environment's family is recognised once, when it is made,
+from the class of the unwrapped environment, and its ``Recipe`` turns each quirk into a wrapper or
+a network option:
+
+    family        output   action                   early stop                       other
+    CarRacing     raw      [tanh, sigmoid, sigmoid]  21st negative reward in a row    -
+    pyBullet ant  tanh     clip (a no-op)            31st negative after step 200     40-step burn-in, progress reward
+    pyBullet      tanh     clip (a no-op)            31st negative after step 200     -
+    anything else raw      clip (Box) / argmax       the environment's own            -
+
+Hebbian weights are normalised after every update for every family except pyBullet.
+Custom families can be added with ``register_recipe``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import gymnasium as gym
+from gymnasium import spaces
+
+from envs.wrappers import (
+    ArgmaxAction,
+    BurnIn,
+    CarRacingAction,
+    ClipAction,
+    NegativeRewardStop,
+    OneHotObservation,
+    PixelObservation,
+    ProgressReward,
+)
+
+
+@dataclass(frozen=True)
+class Recipe:
+    name: str
+    matches: Callable[[gym.Env], bool]  # called once, on the unwrapped environment
+    squash_output: bool = False  # tanh is the network's output activation (the rule sees it)
+    action: Callable[[gym.Env], gym.Env] | None = None  # None: clip a Box, argmax a Discrete
+    burn_in: int = 0
+    reward: Callable[[gym.Env], gym.Env] | None = None
+    stop_patience: int | None = None  # stop after more than this many negative rewards in a row
+    stop_check_after: int = 0
+    normalise_hebbian: bool = True
+
+    def wrap(self, env: gym.Env) -> gym.Env:
+        """Observation pipeline, then the family's quirks, innermost first."""
+        env = observation_pipeline(env)
+        if self.burn_in:
+            env = BurnIn(env, self.burn_in)
+        if self.reward is not None:
+            env = self.reward(env)
+        if self.stop_patience is not None:
+            env = NegativeRewardStop(env, self.stop_patience, self.stop_check_after)
+        return (self.action or default_action)(env)
+
+
+def observation_pipeline(env: gym.Env) -> gym.Env:
+    space = env.observation_space
+    if isinstance(space, spaces.Discrete):
+        return OneHotObservation(env)
+    if isinstance(space, spaces.Box) and len(space.shape) == 3:
+        return PixelObservation(env)
+    if isinstance(space, spaces.Box) and len(space.shape) == 1:
+        return env
+    raise ValueError(f"unsupported observation space {space}: expected a vector Box, an RGB image "
+                     f"Box (H, W, 3) or Discrete")
+
+
+def default_action(env: gym.Env) -> gym.Env:
+    if isinstance(env.action_space, spaces.Box) and len(env.action_space.shape) == 1:
+        return ClipAction(env)
+    if isinstance(env.action_space, spaces.Discrete):
+        return ArgmaxAction(env)
+    raise ValueError(f"unsupported action space {env.action_space}: expected a 1-D Box or Discrete")
+
+
+def _is_car_racing(env: gym.Env) -> bool:
+    try:
+        from gymnasium.envs.box2d.car_racing import CarRacing
+    except ImportError:  # Box2D missing: then no CarRacing can have been made either
+        return False
+    return isinstance(env, CarRacing)
+
+
+def _is_pybullet(env: gym.Env) -> bool:
+    return any(cls.__module__.startswith("pybullet_envs_gymnasium") for cls in type(env).__mro__)
+
+
+def _is_pybullet_ant(env: gym.Env) -> bool:
+    if not _is_pybullet(env):
+        return False
+    from pybullet_envs_gymnasium.gym_locomotion_envs import AntBulletEnv
+
+    return isinstance(env, AntBulletEnv)
+
+
+_PYBULLET = dict(squash_output=True, stop_patience=30, stop_check_after=201, normalise_hebbian=False)
+
+CAR_RACING = Recipe("CarRacing", _is_car_racing, action=CarRacingAction, stop_patience=20)
+PYBULLET_ANT = Recipe("pyBullet ant", _is_pybullet_ant, burn_in=40, reward=ProgressReward, **_PYBULLET)
+PYBULLET = Recipe("pyBullet", _is_pybullet, **_PYBULLET)
+GYMNASIUM = Recipe("Gymnasium", lambda env: True)
+
+_RECIPES: list[Recipe] = [CAR_RACING, PYBULLET_ANT, PYBULLET, GYMNASIUM]
+
+
+def register_recipe(recipe: Recipe) -> None:
+    """Give a family of (custom) environments its own behaviour; newest registrations win."""
+    _RECIPES.insert(0, recipe)
+
+
+def recipe_for(env: gym.Env) -> Recipe:
+    unwrapped = env.unwrapped
+    return next(recipe for recipe in _RECIPES if recipe.matches(unwrapped))

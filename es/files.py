@@ -1,0 +1,145 @@
+"""Files of a run: atomic writes, the original ``.dat`` format and names, safe loading.
+
+A ``.dat`` file is what the original wrote: a float32 numpy array saved with ``torch.save``.
+Loading uses ``torch.load(weights_only=True)`` with only the numpy names such an array needs
+allow-listed (under both their numpy 1 and numpy 2 module paths, since the original files were
+written with numpy 1), so a file that would run code when unpickled is refused.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+
+class FileFormatError(ValueError):
+    """A weight file that is missing, corrupt or not a plain array."""
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write to a temporary file in the same folder, fsync, then rename over ``path``.
+
+    A crash at any moment leaves either the old file or the new one, never a torn one.
+    """
+    path = Path(path)
+    descriptor, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(descriptor, "wb") as handle:
+            handle.write(data)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(temporary, path)
+    except BaseException:
+        try:
+            os.unlink(temporary)
+        except FileNotFoundError:
+            pass
+        raise
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    atomic_write_bytes(path, text.encode())
+
+
+def save_dat(path: Path, array: np.ndarray) -> None:
+    import torch
+
+    buffer = io.BytesIO()
+    torch.save(np.asarray(array, dtype=np.float32), buffer)
+    atomic_write_bytes(path, buffer.getvalue())
+
+
+def _numpy_safe_globals() -> list:
+    from numpy._core import multiarray
+
+    reconstruct = multiarray._reconstruct
+    return [np.ndarray, np.dtype, reconstruct, (reconstruct, "numpy.core.multiarray._reconstruct"),
+            *(type(np.dtype(code)) for code in "fdeihlqbBHIL?")]
+
+
+def load_dat(path: str | Path) -> np.ndarray:
+    """A ``.dat`` weight file as a float32 array (tensors are accepted too)."""
+    import pickle
+
+    import torch
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileFormatError(f"weight file {str(path)!r} does not exist")
+    try:
+        with torch.serialization.safe_globals(_numpy_safe_globals()):
+            loaded = torch.load(path, weights_only=True, map_location="cpu")
+    except pickle.UnpicklingError as error:
+        reason = str(error).splitlines()[0] if "Unsupported global" not in str(error) else (
+            "it asks to import " + str(error).split("Unsupported global:", 1)[1].split(".", 1)[0].strip()
+            + "..., which could run code")
+        raise FileFormatError(f"refused to load {str(path)!r}: not a plain weight array ({reason}); "
+                              "only numpy arrays or tensors saved with torch.save are accepted") from None
+    except Exception as error:
+        raise FileFormatError(f"cannot read weight file {str(path)!r}: {type(error).__name__}: "
+                              f"{str(error).splitlines()[0] if str(error) else ''}") from None
+    if isinstance(loaded, torch.Tensor):
+        loaded = loaded.detach().cpu().numpy()
+    if not isinstance(loaded, np.ndarray) or not np.issubdtype(loaded.dtype, np.number):
+        raise FileFormatError(f"{str(path)!r} holds a {type(loaded).__name__}, not a numeric array")
+    return loaded.astype(np.float32)
+
+
+# --- the original names -------------------------------------------------------------------------
+
+
+def static_file_name(env: str, reward: int, population: int, generation: int) -> str:
+    return f"{env}__rew_{reward}__pop_{population}__{generation}.dat"
+
+
+def hebbian_file_name(env: str, reward: int, rule: str, init: str, population: int, role: str,
+                      generation: int) -> str:
+    return f"HEBcoeffs__{env}__rew_{reward}__{rule}__init_{init}__pop_{population}__{role}__{generation}.dat"
+
+
+def fitness_file_name(run_id: str, env: str) -> str:
+    return f"Fitness_values_{run_id}_{env}.npy"
+
+
+def save_npy(path: Path, array: np.ndarray) -> None:
+    buffer = io.BytesIO()
+    np.save(buffer, array)
+    atomic_write_bytes(path, buffer.getvalue())
+
+
+# --- config and metrics -------------------------------------------------------------------------
+
+
+def write_json(path: Path, data: dict) -> None:
+    atomic_write_text(path, json.dumps(data, indent=2, sort_keys=False) + "\n")
+
+
+def read_json(path: Path) -> dict:
+    with open(path) as handle:
+        return json.load(handle)
+
+
+METRICS_COLUMNS = ("generation", "fitness_mean", "fitness_max", "fitness_min", "fitness_std",
+                   "return_mean", "center_return", "sigma", "lr", "update_factor", "skipped",
+                   "nonfinite", "env_steps", "total_env_steps", "seconds", "total_seconds")
+
+
+def write_metrics(path: Path, rows: list[dict]) -> None:
+    """Rewrite metrics.csv whole (atomically): it is small, and a resume must drop later rows."""
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=METRICS_COLUMNS)
+    writer.writeheader()
+    for row in rows:
+        writer.writerow({key: row[key] for key in METRICS_COLUMNS})
+    atomic_write_text(path, buffer.getvalue())
+
+
+def read_metrics(path: Path) -> list[dict]:
+    with open(path, newline="") as handle:
+        return list(csv.DictReader(handle))

@@ -1,0 +1,147 @@
+"""Hebbian networks (Najarro & Risi 2020): evolved plasticity rules, random weights every episode.
+
+The flat parameter vector has up to three named parts:
+
+- ``coefficients`` (n_synapses, k): one row of k rule coefficients per synapse. Row
+  ``layer_offset + i * n_out + j`` belongs to the synapse from pre-synaptic unit i to post-synaptic
+  unit j, as in the original code (upstream spec §3.3), so original coefficient files load.
+- ``cnn`` (1362): the conv weights of a pixel network. Evolved, never plastic.
+- ``initial_weights``: with ``--init_weights coevolve``, the weights each episode starts from
+  (all module weights in PyTorch order: conv1, conv2 for pixels, then the three dense layers).
+
+Otherwise every episode draws its initial dense weights from the ``--init_weights`` distribution
+with the episode's own rng. At each step the network acts with its current weights and then
+updates them with the activities it just produced (``act``), so the rollout never needs to know
+that the network is plastic.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from policies.conv import ConvFeatures
+from policies.init import COEVOLVE, INIT_CHOICES, sample_weights
+from policies.kernels import hebbian_forward_update
+from policies.network import CONV_SIZE, Layout, NetworkSpec
+from policies.rules import get_rule
+from policies.static import check_length, head_buffers
+
+DISTRIBUTIONS = ("normal", "uniform")
+
+
+@dataclass
+class HebbianState:
+    weights: np.ndarray  # (n_synapses,) float32, the three dense layers, C-order (out, in) each
+    folded: np.ndarray  # (4, n_synapses) float32, rule coefficients in the same order
+    scale: np.ndarray  # (3,) pending normalisation factor per layer
+    work: np.ndarray
+    out: np.ndarray
+    features: ConvFeatures | None
+
+    def layer_weights(self, net: NetworkSpec) -> list[np.ndarray]:
+        """The current true weights of each dense layer, (n_out, n_in) each."""
+        layers, offset = [], 0
+        for index, (n_out, n_in) in enumerate(net.layer_shapes):
+            block = self.weights[offset:offset + n_out * n_in].reshape(n_out, n_in)
+            layers.append(block * self.scale[index])
+            offset += n_out * n_in
+        return layers
+
+
+class HebbianPolicy:
+    kind = "hebbian"
+
+    def __init__(self, net: NetworkSpec, rule: str = "ABCD_lr", init_weights: str = "uni",
+                 normalise: bool = True):
+        if init_weights not in INIT_CHOICES:
+            raise ValueError(f"unknown --init_weights {init_weights!r}; valid values: "
+                             f"{', '.join(INIT_CHOICES)}")
+        self.net = net
+        self.rule = get_rule(rule)
+        self.init_weights = init_weights
+        self.normalise = normalise
+        n_syn, k = net.n_synapses, self.rule.n_coeffs
+        parts: list[tuple[str, tuple[int, ...]]] = [("coefficients", (n_syn, k))]
+        if init_weights == COEVOLVE:
+            parts.append(("initial_weights", (n_syn + (CONV_SIZE if net.pixels else 0),)))
+        elif net.pixels:
+            parts.append(("cnn", (CONV_SIZE,)))
+        self.layout = Layout(parts)
+        self.num_params = self.layout.size
+        self.penalised = self.layout["coefficients"].slice  # the original's L2 term: coefficients only
+        self._synapse_rows = self._kernel_order()
+
+    def _kernel_order(self) -> np.ndarray:
+        """For each weight in kernel order (layer, j, i), its coefficient row (offset + i*n_out + j)."""
+        rows, offset = [], 0
+        for n_out, n_in in self.net.layer_shapes:
+            j, i = np.meshgrid(np.arange(n_out), np.arange(n_in), indexing="ij")
+            rows.append((offset + i * n_out + j).ravel())
+            offset += n_out * n_in
+        return np.concatenate(rows)
+
+    def initial_params(self, rng: np.random.Generator, distribution: str = "normal") -> np.ndarray:
+        """Generation-0 vector: N(0, 1) or U(-1, 1) for every part, as the original (spec §4.5)."""
+        if distribution == "normal":
+            return rng.standard_normal(self.num_params, dtype=np.float32)
+        if distribution == "uniform":
+            return rng.uniform(-1.0, 1.0, self.num_params).astype(np.float32)
+        raise ValueError(f"unknown --distribution {distribution!r}; valid values: {', '.join(DISTRIBUTIONS)}")
+
+    def reset(self, params: np.ndarray, rng: np.random.Generator) -> HebbianState:
+        coeffs = self.layout.view(params, "coefficients")
+        folded = self.rule.fold(coeffs[self._synapse_rows])  # (4, n_synapses)
+        conv = None
+        if self.init_weights == COEVOLVE:
+            initial = params[self.layout["initial_weights"].slice]
+            if self.net.pixels:
+                conv, initial = initial[:CONV_SIZE], initial[CONV_SIZE:]
+            weights = initial.astype(np.float32)  # a copy: the episode changes it
+        else:
+            weights = np.concatenate([sample_weights(self.init_weights, rng, shape).ravel()
+                                      for shape in self.net.layer_shapes])
+            if self.net.pixels:
+                conv = params[self.layout["cnn"].slice]
+        work, out = head_buffers(self.net)
+        features = ConvFeatures(conv) if conv is not None else None
+        return HebbianState(weights, np.ascontiguousarray(folded.reshape(4, -1)),
+                            np.ones(3, dtype=np.float32), work, out, features)
+
+    def act(self, params: np.ndarray, state: HebbianState, obs: np.ndarray):
+        if state.features is not None:
+            obs = state.features(obs)
+        hebbian_forward_update(state.weights, state.folded, state.scale, obs, state.work,
+                               *self.net.head_sizes, self.net.squash_out, self.normalise)
+        return state.out, state
+
+    # --- files in the original shapes --------------------------------------------------------
+
+    def export(self, params: np.ndarray) -> dict[str, np.ndarray]:
+        """The arrays the original wrote: coefficients (n_syn, k), or (n_syn,) for rule A."""
+        coeffs = self.layout.view(params, "coefficients").copy()
+        arrays = {"coeffs": coeffs[:, 0] if self.rule.n_coeffs == 1 else coeffs}
+        if "initial_weights" in self.layout:
+            arrays["coevolved_initial_weights"] = self.layout.view(params, "initial_weights").copy()
+        elif "cnn" in self.layout:
+            arrays["CNN_parameters"] = self.layout.view(params, "cnn").copy()
+        return arrays
+
+    def load(self, arrays: dict[str, np.ndarray]) -> np.ndarray:
+        n_syn, k = self.layout["coefficients"].shape
+        coeffs = np.asarray(arrays["coeffs"])
+        accepted = {(n_syn, k)} | ({(n_syn,)} if k == 1 else set())
+        if coeffs.shape not in accepted:
+            raise ValueError(f"the coefficient file holds shape {coeffs.shape}, but rule "
+                             f"{self.rule.name} on this network needs shape ({n_syn}, {k})"
+                             + (f" or ({n_syn},)" if k == 1 else ""))
+        blocks = [coeffs.reshape(-1).astype(np.float32)]
+        for name, role in (("initial_weights", "coevolved_initial_weights"), ("cnn", "CNN_parameters")):
+            if name in self.layout:
+                if arrays.get(role) is None:
+                    raise ValueError(f"this network also needs {role.replace('_', ' ')} "
+                                     f"({self.layout[name].size} values): pass --path_coev")
+                blocks.append(check_length("the --path_coev file", arrays[role], self.layout[name].size,
+                                           f"{role.replace('_', ' ')} of this network"))
+        return np.concatenate(blocks)

@@ -1,0 +1,96 @@
+"""Network shapes shared by the static and the Hebbian policies (upstream spec §3.1-3.3).
+
+State vectors go through an MLP  obs -> 128 -> 64 -> actions; pixels (3 x 84 x 84) first through
+two conv layers whose 648 features feed the same head. No layer has a bias; hidden layers use tanh;
+the output is raw unless the environment's recipe asks for tanh (pyBullet).
+
+A ``Layout`` names the parts of a flat parameter vector, so that it can be split into weights,
+Hebbian coefficients, CNN weights or co-evolved initial weights, and saved in the original shapes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+HIDDEN = (128, 64)
+CONV_SHAPES = ((6, 3, 3, 3), (8, 6, 5, 5))
+CONV_SIZE = sum(int(np.prod(shape)) for shape in CONV_SHAPES)  # 1362
+CONV_FEATURES = 648
+PIXEL_SHAPE = (3, 84, 84)
+
+
+@dataclass(frozen=True)
+class NetworkSpec:
+    """What a network needs to know about its environment."""
+
+    obs_shape: tuple[int, ...]
+    n_actions: int
+    squash_out: bool = False  # tanh on the output layer, seen by the Hebbian rule too
+
+    def __post_init__(self) -> None:
+        if len(self.obs_shape) not in (1, 3):
+            raise ValueError(f"observations must be vectors or images, got shape {self.obs_shape}")
+        if self.pixels and tuple(self.obs_shape) != PIXEL_SHAPE:
+            raise ValueError(f"pixel observations must be {PIXEL_SHAPE}, got {self.obs_shape}")
+
+    @property
+    def pixels(self) -> bool:
+        return len(self.obs_shape) == 3
+
+    @property
+    def head_sizes(self) -> tuple[int, int, int, int]:
+        n_in = CONV_FEATURES if self.pixels else self.obs_shape[0]
+        return (n_in, *HIDDEN, self.n_actions)
+
+    @property
+    def layer_shapes(self) -> list[tuple[int, int]]:
+        """(n_out, n_in) of the three dense layers, PyTorch's orientation."""
+        sizes = self.head_sizes
+        return [(sizes[i + 1], sizes[i]) for i in range(3)]
+
+    @property
+    def n_synapses(self) -> int:
+        return sum(n_out * n_in for n_out, n_in in self.layer_shapes)
+
+
+@dataclass(frozen=True)
+class Part:
+    name: str
+    shape: tuple[int, ...]
+    offset: int
+
+    @property
+    def size(self) -> int:
+        return int(np.prod(self.shape))
+
+    @property
+    def slice(self) -> slice:
+        return slice(self.offset, self.offset + self.size)
+
+
+class Layout:
+    """Named, contiguous parts of a flat parameter vector, in order."""
+
+    def __init__(self, parts: list[tuple[str, tuple[int, ...]]]):
+        self.parts: dict[str, Part] = {}
+        offset = 0
+        for name, shape in parts:
+            part = Part(name, tuple(shape), offset)
+            self.parts[name] = part
+            offset += part.size
+        self.size = offset
+
+    def __getitem__(self, name: str) -> Part:
+        return self.parts[name]
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.parts
+
+    def view(self, params: np.ndarray, name: str) -> np.ndarray:
+        part = self.parts[name]
+        return params[part.slice].reshape(part.shape)
+
+    def describe(self) -> dict[str, list[int]]:
+        return {name: list(part.shape) for name, part in self.parts.items()}

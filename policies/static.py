@@ -1,0 +1,78 @@
+"""Static networks: the weights themselves are evolved (the baseline of Najarro & Risi 2020).
+
+The flat vector is the original's ``parameters_to_vector`` order, each weight C-order in PyTorch's
+(out, in) orientation: [conv1 (6,3,3,3), conv2 (8,6,5,5)] for pixels, then fc1, fc2, fc3. An
+original ``.dat`` weight file therefore loads unchanged.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from policies.conv import ConvFeatures
+from policies.init import default_bound
+from policies.kernels import static_forward
+from policies.network import CONV_SHAPES, CONV_SIZE, Layout, NetworkSpec
+
+
+@dataclass
+class StaticState:
+    head: np.ndarray
+    work: np.ndarray
+    out: np.ndarray
+    features: ConvFeatures | None
+
+
+def head_buffers(net: NetworkSpec) -> tuple[np.ndarray, np.ndarray]:
+    """The per-episode work buffer [x | h1 | h2 | out] and the view of its output."""
+    work = np.zeros(sum(net.head_sizes), dtype=np.float32)
+    return work, work[-net.n_actions:]
+
+
+def check_length(name: str, array: np.ndarray, expected: int, what: str) -> np.ndarray:
+    array = np.asarray(array)
+    if array.size != expected or (array.ndim == 2 and 1 not in array.shape) or array.ndim > 2:
+        raise ValueError(f"{name} holds shape {array.shape}, but {what} needs {expected} values "
+                         f"(shape ({expected},))")
+    return array.reshape(-1).astype(np.float32)
+
+
+class StaticPolicy:
+    kind = "static"
+
+    def __init__(self, net: NetworkSpec):
+        self.net = net
+        conv = [(f"conv{i + 1}", shape) for i, shape in enumerate(CONV_SHAPES)] if net.pixels else []
+        dense = [(f"fc{i + 1}", shape) for i, shape in enumerate(net.layer_shapes)]
+        self.layout = Layout(conv + dense)
+        self.num_params = self.layout.size
+        self.penalised = slice(0, self.num_params)  # the L2 term covers every weight
+        self._head = slice(CONV_SIZE if net.pixels else 0, self.num_params)
+        self._sizes = net.head_sizes
+
+    def initial_params(self, rng: np.random.Generator, distribution: str | None = None) -> np.ndarray:
+        """PyTorch's default initialisation, U(+-1/sqrt(fan_in)) per layer, as the original."""
+        blocks = []
+        for part in self.layout.parts.values():
+            bound = default_bound(int(np.prod(part.shape[1:])))
+            blocks.append(rng.uniform(-bound, bound, part.size))
+        return np.concatenate(blocks).astype(np.float32)
+
+    def reset(self, params: np.ndarray, rng: np.random.Generator | None = None) -> StaticState:
+        work, out = head_buffers(self.net)
+        features = ConvFeatures(params[:CONV_SIZE]) if self.net.pixels else None
+        return StaticState(params[self._head], work, out, features)
+
+    def act(self, params: np.ndarray, state: StaticState, obs: np.ndarray):
+        if state.features is not None:
+            obs = state.features(obs)
+        static_forward(state.head, obs, state.work, *self._sizes, self.net.squash_out)
+        return state.out, state
+
+    def export(self, params: np.ndarray) -> dict[str, np.ndarray]:
+        return {"weights": np.asarray(params, dtype=np.float32).copy()}
+
+    def load(self, arrays: dict[str, np.ndarray]) -> np.ndarray:
+        return check_length("the weight file", arrays["weights"], self.num_params, "this network")
