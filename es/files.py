@@ -12,6 +12,7 @@ import csv
 import io
 import json
 import os
+import re
 import tempfile
 from pathlib import Path
 
@@ -63,6 +64,24 @@ def _numpy_safe_globals() -> list:
             *(type(np.dtype(code)) for code in "fdeihlqbBHIL?")]
 
 
+def _refusal_reason(error: Exception) -> str:
+    """The informative part of torch's weights_only refusal.
+
+    torch's first lines are boilerplate advising ``weights_only=False``, exactly what must not be
+    done with an untrusted file; the global it refused (``GLOBAL posix.system``) or the unpickler's
+    own complaint comes later.
+    """
+    text = str(error)
+    match = re.search(r"GLOBAL ([\w.]+)", text)
+    if match:
+        return f"it asks to import {match.group(1)}, which could run code"
+    complaint = re.search(r"WeightsUnpickler error:\s*(\S.*)", text)
+    if complaint:
+        return complaint.group(1).strip()
+    lines = [line.strip() for line in text.splitlines() if line.strip()]
+    return lines[0] if lines else type(error).__name__
+
+
 def load_dat(path: str | Path) -> np.ndarray:
     """A ``.dat`` weight file as a float32 array (tensors are accepted too)."""
     import pickle
@@ -76,9 +95,7 @@ def load_dat(path: str | Path) -> np.ndarray:
         with torch.serialization.safe_globals(_numpy_safe_globals()):
             loaded = torch.load(path, weights_only=True, map_location="cpu")
     except pickle.UnpicklingError as error:
-        reason = str(error).splitlines()[0] if "Unsupported global" not in str(error) else (
-            "it asks to import " + str(error).split("Unsupported global:", 1)[1].split(".", 1)[0].strip()
-            + "..., which could run code")
+        reason = _refusal_reason(error)
         raise FileFormatError(f"refused to load {str(path)!r}: not a plain weight array ({reason}); "
                               "only numpy arrays or tensors saved with torch.save are accepted") from None
     except Exception as error:
