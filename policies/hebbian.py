@@ -24,7 +24,7 @@ import numpy as np
 from policies.conv import ConvFeatures
 from policies.init import COEVOLVE, INIT_CHOICES, sample_weights
 from policies.kernels import hebbian_forward_update
-from policies.network import CONV_SIZE, Layout, NetworkSpec
+from policies.network import CONV_SIZE, Layout, NetworkSpec, from_kernel_layout, to_kernel_layout
 from policies.rules import get_rule
 from policies.static import check_length, head_buffers
 
@@ -33,8 +33,8 @@ DISTRIBUTIONS = ("normal", "uniform")
 
 @dataclass
 class HebbianState:
-    weights: np.ndarray  # (n_synapses,) float32, the three dense layers, C-order (out, in) each
-    folded: np.ndarray  # (4, n_synapses) float32, rule coefficients in the same order
+    weights: np.ndarray  # (n_synapses,) float32, the dense layers in the kernels' layout (W^T each)
+    folded: np.ndarray  # (4 * n_synapses,) float32, per layer the planes (a, b, c, d) of the rule
     scale: np.ndarray  # (3,) pending normalisation factor per layer
     work: np.ndarray
     out: np.ndarray
@@ -42,12 +42,8 @@ class HebbianState:
 
     def layer_weights(self, net: NetworkSpec) -> list[np.ndarray]:
         """The current true weights of each dense layer, (n_out, n_in) each."""
-        layers, offset = [], 0
-        for index, (n_out, n_in) in enumerate(net.layer_shapes):
-            block = self.weights[offset:offset + n_out * n_in].reshape(n_out, n_in)
-            layers.append(block * self.scale[index])
-            offset += n_out * n_in
-        return layers
+        layers = from_kernel_layout(self.weights, net.layer_shapes)
+        return [layer * self.scale[index] for index, layer in enumerate(layers)]
 
 
 class HebbianPolicy:
@@ -71,16 +67,6 @@ class HebbianPolicy:
         self.layout = Layout(parts)
         self.num_params = self.layout.size
         self.penalised = self.layout["coefficients"].slice  # the original's L2 term: coefficients only
-        self._synapse_rows = self._kernel_order()
-
-    def _kernel_order(self) -> np.ndarray:
-        """For each weight in kernel order (layer, j, i), its coefficient row (offset + i*n_out + j)."""
-        rows, offset = [], 0
-        for n_out, n_in in self.net.layer_shapes:
-            j, i = np.meshgrid(np.arange(n_out), np.arange(n_in), indexing="ij")
-            rows.append((offset + i * n_out + j).ravel())
-            offset += n_out * n_in
-        return np.concatenate(rows)
 
     def initial_params(self, rng: np.random.Generator, distribution: str = "normal") -> np.ndarray:
         """Generation-0 vector: N(0, 1) or U(-1, 1) for every part, as the original (spec §4.5)."""
@@ -90,24 +76,35 @@ class HebbianPolicy:
             return rng.uniform(-1.0, 1.0, self.num_params).astype(np.float32)
         raise ValueError(f"unknown --distribution {distribution!r}; valid values: {', '.join(DISTRIBUTIONS)}")
 
-    def reset(self, params: np.ndarray, rng: np.random.Generator) -> HebbianState:
+    def fold(self, params: np.ndarray) -> np.ndarray:
+        """Per layer, the rule's planes (a, b, c, d) over (n_in, n_out), flat: what the kernel reads.
+
+        Coefficient row ``offset + i*n_out + j`` already is position (i, j) of the layer's W^T.
+        """
         coeffs = self.layout.view(params, "coefficients")
-        folded = self.rule.fold(coeffs[self._synapse_rows])  # (4, n_synapses)
-        conv = None
+        blocks, offset = [], 0
+        for n_out, n_in in self.net.layer_shapes:
+            blocks.append(self.rule.fold(coeffs[offset:offset + n_in * n_out]).ravel())
+            offset += n_in * n_out
+        return np.concatenate(blocks)
+
+    def initial_weights(self, params: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray | None]:
+        """The episode's starting dense weights (kernels' layout) and the conv weights, if any."""
         if self.init_weights == COEVOLVE:
             initial = params[self.layout["initial_weights"].slice]
-            if self.net.pixels:
-                conv, initial = initial[:CONV_SIZE], initial[CONV_SIZE:]
-            weights = initial.astype(np.float32)  # a copy: the episode changes it
-        else:
-            weights = np.concatenate([sample_weights(self.init_weights, rng, shape).ravel()
-                                      for shape in self.net.layer_shapes])
-            if self.net.pixels:
-                conv = params[self.layout["cnn"].slice]
+            conv = initial[:CONV_SIZE] if self.net.pixels else None
+            dense = initial[CONV_SIZE:] if self.net.pixels else initial
+            return to_kernel_layout(dense, self.net.layer_shapes), conv
+        dense = np.concatenate([sample_weights(self.init_weights, rng, shape).ravel()
+                                for shape in self.net.layer_shapes])
+        conv = params[self.layout["cnn"].slice] if self.net.pixels else None
+        return to_kernel_layout(dense, self.net.layer_shapes), conv
+
+    def reset(self, params: np.ndarray, rng: np.random.Generator) -> HebbianState:
+        weights, conv = self.initial_weights(params, rng)
         work, out = head_buffers(self.net)
         features = ConvFeatures(conv) if conv is not None else None
-        return HebbianState(weights, np.ascontiguousarray(folded.reshape(4, -1)),
-                            np.ones(3, dtype=np.float32), work, out, features)
+        return HebbianState(weights, self.fold(params), np.ones(3, dtype=np.float32), work, out, features)
 
     def act(self, params: np.ndarray, state: HebbianState, obs: np.ndarray):
         if state.features is not None:

@@ -55,6 +55,25 @@ class NetworkSpec:
         return sum(n_out * n_in for n_out, n_in in self.layer_shapes)
 
 
+def to_kernel_layout(weights: np.ndarray, layer_shapes: list[tuple[int, int]]) -> np.ndarray:
+    """Dense layers flat in PyTorch order (each (n_out, n_in), C-order) -> the kernels' layout
+    (each transposed to (n_in, n_out), C-order), as a new float32 array."""
+    blocks, offset = [], 0
+    for n_out, n_in in layer_shapes:
+        blocks.append(weights[offset:offset + n_out * n_in].reshape(n_out, n_in).T.ravel())
+        offset += n_out * n_in
+    return np.concatenate(blocks).astype(np.float32)
+
+
+def from_kernel_layout(weights: np.ndarray, layer_shapes: list[tuple[int, int]]) -> list[np.ndarray]:
+    """The kernels' flat layout -> one (n_out, n_in) matrix per layer (PyTorch's orientation)."""
+    layers, offset = [], 0
+    for n_out, n_in in layer_shapes:
+        layers.append(weights[offset:offset + n_out * n_in].reshape(n_in, n_out).T)
+        offset += n_out * n_in
+    return layers
+
+
 @dataclass(frozen=True)
 class Part:
     name: str

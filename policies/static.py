@@ -14,12 +14,12 @@ import numpy as np
 from policies.conv import ConvFeatures
 from policies.init import default_bound
 from policies.kernels import static_forward
-from policies.network import CONV_SHAPES, CONV_SIZE, Layout, NetworkSpec
+from policies.network import CONV_SHAPES, CONV_SIZE, Layout, NetworkSpec, to_kernel_layout
 
 
 @dataclass
 class StaticState:
-    head: np.ndarray
+    head: np.ndarray  # the dense layers in the kernels' layout
     work: np.ndarray
     out: np.ndarray
     features: ConvFeatures | None
@@ -63,7 +63,7 @@ class StaticPolicy:
     def reset(self, params: np.ndarray, rng: np.random.Generator | None = None) -> StaticState:
         work, out = head_buffers(self.net)
         features = ConvFeatures(params[:CONV_SIZE]) if self.net.pixels else None
-        return StaticState(params[self._head], work, out, features)
+        return StaticState(to_kernel_layout(params[self._head], self.net.layer_shapes), work, out, features)
 
     def act(self, params: np.ndarray, state: StaticState, obs: np.ndarray):
         if state.features is not None:
