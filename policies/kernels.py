@@ -104,9 +104,13 @@ def _plastic(weights_t, folded, pre, post, scale, squash):
 
 
 @njit(**_FLAGS)
-def _load_input(obs, work, n_in):
+def _activities(obs, work, n_in, n_h1, n_h2):
+    """Copy the observation into ``work`` = [x | h1 | h2 | out] and return the four views."""
     for i in range(n_in):
         work[i] = np.float32(obs[i])
+    h2_start = n_in + n_h1
+    out_start = h2_start + n_h2
+    return work[:n_in], work[n_in:h2_start], work[h2_start:out_start], work[out_start:]
 
 
 @njit(**_FLAGS)
@@ -115,11 +119,7 @@ def static_forward(weights, obs, work, n_in, n_h1, n_h2, n_out, squash_out):
     one = np.float32(1.0)
     o2 = n_in * n_h1
     o3 = o2 + n_h1 * n_h2
-    _load_input(obs, work, n_in)
-    x = work[:n_in]
-    h1 = work[n_in:n_in + n_h1]
-    h2 = work[n_in + n_h1:n_in + n_h1 + n_h2]
-    out = work[n_in + n_h1 + n_h2:]
+    x, h1, h2, out = _activities(obs, work, n_in, n_h1, n_h2)
     _dense(weights[:o2].reshape(n_in, n_h1), x, h1, one, True)
     _dense(weights[o2:o3].reshape(n_h1, n_h2), h1, h2, one, True)
     _dense(weights[o3:].reshape(n_h2, n_out), h2, out, one, squash_out)
@@ -136,11 +136,7 @@ def hebbian_forward_update(weights, folded, scale, obs, work, n_in, n_h1, n_h2, 
     one = np.float32(1.0)
     o2 = n_in * n_h1
     o3 = o2 + n_h1 * n_h2
-    _load_input(obs, work, n_in)
-    x = work[:n_in]
-    h1 = work[n_in:n_in + n_h1]
-    h2 = work[n_in + n_h1:n_in + n_h1 + n_h2]
-    out = work[n_in + n_h1 + n_h2:]
+    x, h1, h2, out = _activities(obs, work, n_in, n_h1, n_h2)
     largest = _plastic(weights[:o2].reshape(n_in, n_h1), folded[:4 * o2].reshape(4, n_in, n_h1),
                        x, h1, scale[0], True)
     scale[0] = one / largest if normalise and largest > 0 else one
