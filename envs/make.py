@@ -32,18 +32,20 @@ def _usable(spec) -> bool:
 def resolve_env_id(env_id: str, notify=print) -> str:
     """The registered id to make for ``env_id``; retired versions map to the newest one.
 
-    ``module:EnvId`` imports ``module`` first (Gymnasium's form for custom environments).
+    ``module:EnvId`` imports ``module`` first (Gymnasium's form for custom environments); the
+    returned id keeps the ``module:`` part, so worker processes and resumed runs import it too.
     """
+    prefix = ""
     if ":" in env_id:
         module, _, rest = env_id.partition(":")
         try:
             importlib.import_module(module)
         except ImportError as error:
             raise EnvironmentError_(f"cannot import {module!r} for environment {env_id!r}: {error}") from None
-        env_id = rest
+        env_id, prefix = rest, f"{module}:"
     registry = gym.registry
     if env_id in registry and _usable(registry[env_id]):
-        return env_id
+        return prefix + env_id
     try:
         namespace, name, _ = parse_env_id(env_id)
     except gym.error.Error:
@@ -53,7 +55,7 @@ def resolve_env_id(env_id: str, notify=print) -> str:
     if versions:
         newest = max(versions, key=lambda spec: spec.version or 0).id
         notify(f"note: {env_id} is retired in Gymnasium {gym.__version__}; using {newest}")
-        return newest
+        return prefix + newest
     known = [spec_id for spec_id, spec in registry.items() if _usable(spec)]
     close = difflib.get_close_matches(env_id, known, n=5, cutoff=0.5)
     hint = f"; did you mean {', '.join(close)}?" if close else "; see gymnasium.pprint_registry()"
