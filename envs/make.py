@@ -47,15 +47,16 @@ def resolve_env_id(env_id: str, notify=print) -> str:
     if env_id in registry and _usable(registry[env_id]):
         return prefix + env_id
     try:
-        namespace, name, _ = parse_env_id(env_id)
+        namespace, name, version = parse_env_id(env_id)
     except gym.error.Error:
-        namespace, name = None, None
+        namespace, name, version = None, None, None
     versions = [spec for spec in registry.values()
                 if spec.namespace == namespace and spec.name == name and _usable(spec)]
-    if versions:
-        newest = max(versions, key=lambda spec: spec.version or 0).id
-        notify(f"note: {env_id} is retired in Gymnasium {gym.__version__}; using {newest}")
-        return prefix + newest
+    newest = max(versions, key=lambda spec: spec.version or 0) if versions else None
+    if newest is not None and (version is None or version < (newest.version or 0)):
+        why = "names no version" if version is None else f"is retired in Gymnasium {gym.__version__}"
+        notify(f"note: {env_id} {why}; using {newest.id}")
+        return prefix + newest.id
     known = [spec_id for spec_id, spec in registry.items() if _usable(spec)]
     close = difflib.get_close_matches(env_id, known, n=5, cutoff=0.5)
     hint = f"; did you mean {', '.join(close)}?" if close else "; see gymnasium.pprint_registry()"

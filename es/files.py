@@ -86,11 +86,11 @@ def load_dat(path: str | Path) -> np.ndarray:
     """A ``.dat`` weight file as a float32 array (tensors are accepted too)."""
     import pickle
 
+    path = Path(path)
+    if not path.is_file():  # before importing torch: a typo should fail at once
+        raise FileFormatError(f"weight file {str(path)!r} does not exist")
     import torch
 
-    path = Path(path)
-    if not path.is_file():
-        raise FileFormatError(f"weight file {str(path)!r} does not exist")
     try:
         with torch.serialization.safe_globals(_numpy_safe_globals()):
             loaded = torch.load(path, weights_only=True, map_location="cpu")
