@@ -24,5 +24,7 @@ with quiet_output():
     except ImportError:  # pyBullet is optional for users who only need Gymnasium/MuJoCo
         pass
 
+import envs.damaged  # noqa: E402,F401  (registers the damaged ants of Najarro & Risi 2020)
+
 __all__ = ["EnvironmentError_", "Episode", "Problem", "ProblemSpec", "Recipe", "episode_rng",
            "make_env", "quiet_output", "recipe_for", "register_recipe", "resolve_env_id", "rollout"]

@@ -1,0 +1,87 @@
+#!/usr/bin/env python
+"""Expected wall time per generation of the paper's experiments, from the measured cost of a step.
+
+    python experiments/step_cost.py --environment CarRacing-v0 --kind hebbian
+    python experiments/step_cost.py --environment AntBulletEnv-v0,AntAsymRightBulletEnv-v0 --kind static
+
+A real training run's first generations are no guide: random networks end their episodes early
+(CarRacing after 21 steps without a new tile, the ant after step 201 + 31 steps without progress),
+while a trained one runs all 1000 steps. So this measures, per environment, the CPU time of one
+policy step (``policy.act`` + ``env.step`` through the recipe's wrappers, generation-0 parameters)
+and of one reset (the ant's 40-step burn-in included), in this process's CPU time so that other
+load on the machine does not inflate it, and projects
+
+    seconds per generation = (popsize + 1) x sum over envs (reset + length x step) / workers
+
+for episodes of ``--length`` environment steps (1000, the TimeLimit, reached by a policy that
+survives: 960 policy steps after the ant's burn-in). It ignores
+the master's work and assumes the workers scale linearly (1.9x on 2 cores, environment-notes §5).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from envs import ProblemSpec, resolve_env_id  # noqa: E402
+
+
+def step_and_reset_cost(problem, env_index: int, steps: int) -> tuple[float, float]:
+    """CPU seconds per policy step and per reset, resetting whenever an episode ends."""
+    env, policy = problem.envs[env_index], problem.policy
+    params = policy.initial_params(np.random.default_rng(0))
+    observation, _ = env.reset(seed=0)  # untimed: the first act compiles the numba kernels
+    env.step(policy.act(params, policy.reset(params, np.random.default_rng(0)), observation)[0])
+    step_time = reset_time = 0.0
+    done_steps, resets, seed = 0, 0, 0
+    while done_steps < steps:
+        started = time.process_time()
+        observation, _ = env.reset(seed=seed)
+        state = policy.reset(params, np.random.default_rng(seed))
+        reset_time += time.process_time() - started
+        resets, seed = resets + 1, seed + 1
+        started = time.process_time()
+        while done_steps < steps:
+            output, state = policy.act(params, state, observation)
+            observation, _, terminated, truncated, _ = env.step(output)
+            done_steps += 1
+            if terminated or truncated:
+                break
+        step_time += time.process_time() - started
+    return step_time / done_steps, reset_time / resets
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
+    parser.add_argument("--environment", required=True, help="comma-separated ids, as for training")
+    parser.add_argument("--kind", choices=("static", "hebbian"), default="static")
+    parser.add_argument("--steps", type=int, default=1000, help="policy steps measured per environment")
+    parser.add_argument("--popsize", type=int, default=200)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--length", type=int, default=1000,
+                        help="environment steps per episode (burn-in included) to project for")
+    args = parser.parse_args()
+    env_ids = tuple(resolve_env_id(env_id) for env_id in args.environment.split(","))
+    problem = ProblemSpec(env_ids, args.kind).build()
+    try:
+        costs = [step_and_reset_cost(problem, index, args.steps) for index in range(len(env_ids))]
+        policy_steps = [args.length - recipe.burn_in for recipe in problem.recipes]
+    finally:
+        problem.close()
+    for env_id, (step, reset) in zip(env_ids, costs):
+        print(f"{env_id} ({args.kind}): {step * 1e3:.2f} ms CPU per policy step, {reset * 1e3:.1f} ms per reset")
+    episode = sum(reset + length * step for (step, reset), length in zip(costs, policy_steps))
+    seconds = (args.popsize + 1) * episode / args.workers
+    print(f"projected: {seconds:.0f} s per generation ({seconds / 60:.1f} min) for popsize {args.popsize}, "
+          f"{args.length}-step episodes on {len(env_ids)} environment(s), {args.workers} workers")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,154 @@
+"""Evaluation statistics and adaptation plots (envs/evaluation.py, the evaluate scripts).
+
+- the real evaluate_static.py prints one row per environment, mean ± std over N episodes, and
+  ``--json`` holds the same numbers (CartPole pays 1 per step, so returns equal steps exactly);
+- the distance walked by ants is the torso's straight-line (x, y) displacement from the start of
+  the policy steps, and "forward" its x part, checked against MuJoCo's own ``info["x_position"]``
+  and pyBullet's torso pose (and the progress reward, ~60.6 per metre along +x);
+- ``trace_episode`` replays the first episode exactly and records per-step weight norms;
+- the real evaluate_hebb.py ``--plot`` writes a PNG that matplotlib reads back, with no display;
+- unwritable output paths are refused before any episode runs: one line, exit code 2.
+"""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from envs import ProblemSpec, rollout
+from envs.evaluation import evaluate, format_table, trace_episode
+from es.files import save_dat
+
+ROOT = Path(__file__).resolve().parent.parent
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def run_script(script: str, *args: str) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    env.pop("DISPLAY", None)  # headless, as on a cluster node
+    return subprocess.run([sys.executable, str(ROOT / script), *args], capture_output=True, text=True,
+                          cwd=ROOT, env=env, timeout=120)
+
+
+def saved_params(tmp_path: Path, env_id: str, kind: str) -> Path:
+    """A weight file as the training scripts write it, from the policy's generation-0 parameters."""
+    problem = ProblemSpec((env_id,), kind).build()
+    try:
+        arrays = problem.policy.export(problem.policy.initial_params(np.random.default_rng(4)))
+    finally:
+        problem.close()
+    (name, array), = arrays.items()
+    path = tmp_path / f"{name}.dat"
+    save_dat(path, array)
+    return path
+
+
+def test_static_table_and_json(tmp_path):
+    weights = saved_params(tmp_path, "CartPole-v1", "static")
+    out = tmp_path / "stats.json"
+    result = run_script("evaluate_static.py", "--environment", "CartPole-v1,CartPole-v0", "--path_weights",
+                        str(weights), "--episodes", "3", "--seed", "10", "--json", str(out))
+    assert result.returncode == 0, result.stderr
+    data = json.loads(out.read_text())
+    assert data["kind"] == "static" and data["episodes"] == 3 and data["command"][0] == "evaluate_static.py"
+    rows = {entry["environment"]: entry for entry in data["environments"]}
+    assert list(rows) == ["CartPole-v1", "CartPole-v0"]
+    lines = result.stdout.splitlines()
+    header = next(index for index, line in enumerate(lines) if line.startswith("environment "))
+    table = lines[header + 1:header + 3]
+    for (env_id, entry), row in zip(rows.items(), table, strict=True):
+        assert entry["seeds"] == [10, 11, 12]
+        assert entry["returns"] == entry["steps"]  # +1 per step
+        assert entry["mean"] == pytest.approx(np.mean(entry["returns"]))
+        assert entry["std"] == pytest.approx(np.std(entry["returns"]))
+        assert "distance_mean" not in entry
+        assert row.split() == [env_id, "3", f"{entry['mean']:.2f}", "±", f"{entry['std']:.2f}", "-", "-"]
+    assert f"statistics: {out}" in result.stdout
+
+
+def test_mujoco_ant_distance_is_the_torso_displacement():
+    problem = ProblemSpec(("Ant-v5",), "static").build()
+    try:
+        params = problem.policy.initial_params(np.random.default_rng(4))
+        (report,) = evaluate(problem, params, episodes=1, seed=3)
+        env = problem.envs[0]
+        env.reset(seed=3)
+        start = env.unwrapped.data.qpos[:2].copy()
+        last = {}
+        episode = rollout(env, problem.policy, params, 3, observer=lambda t, r, s, info: last.update(info))
+    finally:
+        problem.close()
+    end = np.array([last["x_position"], last["y_position"]])
+    assert report.returns == [episode.total_return]
+    assert report.distances == [pytest.approx(float(np.linalg.norm(end - start)), abs=1e-9)]
+    assert report.forward == [pytest.approx(float(end[0] - start[0]), abs=1e-9)]
+    row = format_table([report]).splitlines()[1].split()
+    assert row[-6:] == [f"{report.distances[0]:.2f}", "±", "0.00", f"{report.forward[0]:.2f}", "±", "0.00"]
+
+
+def test_pybullet_ant_distance_starts_after_the_burn_in():
+    problem = ProblemSpec(("AntBulletEnv-v0",), "hebbian").build()
+    try:
+        params = problem.policy.initial_params(np.random.default_rng(4))
+        (report,) = evaluate(problem, params, episodes=1, seed=1)
+        env = problem.envs[0]
+        torso = env.unwrapped.robot.robot_body
+        env.reset(seed=1)  # the burn-in runs inside the reset
+        start = torso.current_position()[:2]
+        rollout(env, problem.policy, params, 1)
+        end = torso.current_position()[:2]
+    finally:
+        problem.close()
+    assert report.distances == [pytest.approx(float(np.linalg.norm(end - start)), abs=1e-9)]
+    assert report.forward == [pytest.approx(float(end[0] - start[0]), abs=1e-9)]
+    # the return is pyBullet's progress reward: about 60.6 per metre toward the target at +x
+    assert report.returns[0] / 60.6 == pytest.approx(report.forward[0], abs=0.02)
+
+
+def test_trace_replays_the_first_episode_with_weight_norms():
+    problem = ProblemSpec(("AntBulletEnv-v0",), "hebbian").build()
+    try:
+        params = problem.policy.initial_params(np.random.default_rng(4))
+        (report,) = evaluate(problem, params, episodes=1, seed=1)
+        trace = trace_episode(problem, params, seed=1)
+    finally:
+        problem.close()
+    assert trace.episode.total_return == report.returns[0]
+    policy_steps = report.steps[0] - 40  # the burn-in is not a policy step
+    assert len(trace.rewards) == len(trace.distances) == len(trace.forward) == len(trace.layer_norms) == policy_steps
+    assert sum(trace.rewards) == pytest.approx(report.returns[0])
+    assert trace.distances[-1] == pytest.approx(report.distances[0])
+    assert trace.layer_shapes == [(128, 28), (64, 128), (8, 64)]
+    assert np.all(np.array(trace.layer_norms) > 0)
+
+
+def test_hebbian_plot_is_a_png(tmp_path):
+    import matplotlib.image
+
+    coeffs = saved_params(tmp_path, "AntBulletEnv-v0", "hebbian")
+    plot = tmp_path / "adaptation.png"
+    result = run_script("evaluate_hebb.py", "--environment", "AntBulletEnv-v0", "--path_hebb", str(coeffs),
+                        "--seed", "1", "--plot", str(plot))
+    assert result.returncode == 0, result.stderr
+    assert plot.read_bytes()[:8] == PNG_SIGNATURE
+    image = matplotlib.image.imread(plot)
+    assert image.ndim == 3 and image.shape[0] > 200 and image.shape[1] > 200
+    assert "adaptation plot (AntBulletEnv-v0, seed 1" in result.stdout
+
+
+@pytest.mark.parametrize("flag", ["--json", "--plot"])
+def test_unwritable_output_is_one_line_and_exit_2(tmp_path, capsys, flag):
+    import evaluate_static
+
+    weights = saved_params(tmp_path, "CartPole-v1", "static")
+    missing = tmp_path / "no" / "such" / "file"
+    code = evaluate_static.main(["--environment", "CartPole-v1", "--path_weights", str(weights),
+                                 flag, str(missing)])
+    error = capsys.readouterr().err.strip()
+    assert code == 2
+    assert error.splitlines() == [f"evaluate_static.py: error: {flag} {missing}: {missing.parent} is not an "
+                                  "existing writable folder"]
