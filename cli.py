@@ -18,7 +18,8 @@ import numpy as np
 import envs
 from envs import ProblemSpec
 from es.files import FileFormatError
-from es.run import Run, TrainConfig, UserError, new_run_dir
+from es.progress import display_for
+from es.run import Run, SaveError, TrainConfig, UserError, new_run_dir
 from policies import DISTRIBUTIONS, INIT_CHOICES, RULES
 
 USER_ERRORS = (UserError, FileFormatError, envs.EnvironmentError_)
@@ -88,7 +89,12 @@ def training_parser(prog: str, description: str, folder: str) -> Parser:
     add("--episodes", type=positive_int, default=1, metavar="E",
         help="episodes per fitness evaluation (the fitness is their mean)")
     add("--resume", default=None, metavar="RUN_DIR", help="continue the run saved in RUN_DIR")
-    add("--backend", choices=("process",), default="process", help="parallel backend for --threads > 1")
+    add("--backend", choices=("process", "ray"), default="process",
+        help="parallel backend for --threads > 1: a process pool on this machine, or Ray (one machine "
+             "or a cluster; pip install -r requirements-ray.txt)")
+    add("--ray_address", default=None, metavar="ADDRESS",
+        help="with --backend ray: 'auto' joins the cluster `ray start` runs on this machine, HOST:PORT "
+             "another one; default: start a local Ray with --threads CPUs")
     return parser
 
 
@@ -110,11 +116,14 @@ def population_size(requested: int) -> int:
 
 def config_from_args(kind: str, args: argparse.Namespace) -> TrainConfig:
     seed = args.seed if args.seed is not None else secrets.randbelow(2**31)
+    if args.ray_address is not None and args.backend != "ray":
+        raise UserError(f"--ray_address {args.ray_address} needs --backend ray")
     hebbian = {key: getattr(args, key) for key in ("hebb_rule", "init_weights", "distribution") if hasattr(args, key)}
     return TrainConfig(kind=kind, environment=args.environment, env_ids=resolve_environments(args.environment),
                        popsize=population_size(args.popsize), lr=args.lr, decay=args.decay, sigma=args.sigma,
                        generations=args.generations, print_every=args.print_every, folder=args.folder,
-                       threads=args.threads, seed=seed, episodes=args.episodes, backend=args.backend, **hebbian)
+                       threads=args.threads, seed=seed, episodes=args.episodes, backend=args.backend,
+                       ray_address=args.ray_address, **hebbian)
 
 
 def config_for_resume(kind: str, args: argparse.Namespace, argv: list[str]) -> tuple[TrainConfig, Path]:
@@ -131,13 +140,14 @@ def config_for_resume(kind: str, args: argparse.Namespace, argv: list[str]) -> t
         script = "train_hebb.py" if config.kind == "hebbian" else "train_static.py"
         raise UserError(f"--resume {run_dir}: this is a {config.kind} run; resume it with {script}")
     given = {item.split("=")[0] for item in argv if item.startswith("--")}
-    for name in ("generations", "threads", "backend", "print_every"):  # what a resume may change
+    for name in ("generations", "threads", "backend", "ray_address", "print_every"):  # what a resume may change
         if f"--{name}" in given:
             setattr(config, name, getattr(args, name))
     return config, run_dir
 
 
 def check_writable(folder: str) -> None:
+    """Refuse, before anything is built or created, a --folder that could not hold a run folder."""
     path = Path(folder)
     existing = next((parent for parent in (path, *path.parents) if parent.exists()), Path("."))
     if not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK):
@@ -156,26 +166,40 @@ def train_main(kind: str, parser: Parser, argv: list[str] | None = None) -> int:
             check_writable(config.folder)
         spec = ProblemSpec(tuple(config.env_ids), kind, config.hebb_rule, config.init_weights)
         try:
-            run = Run(config, spec, run_dir or Path("."), log=_log)
+            run = Run(config, spec, run_dir or Path("."), log=_log, display=display_for(sys.stdout))
+        except USER_ERRORS:
+            raise
         except ValueError as error:  # incompatible environments, bad network, ...
             raise UserError(str(error)) from None
+        except Exception as error:  # an environment that cannot be made, a worker that cannot start
+            raise UserError(f"cannot start the run: {type(error).__name__}: {error}") from None
         if run_dir is None:
             try:
                 run.run_dir = new_run_dir(config.folder, config.env_label, config.seed)
             except OSError as error:
                 raise UserError(f"--folder {config.folder}: {error.strerror or error}") from None
             run.write_config([parser.prog, *argv])
+            run.save_checkpoint()  # resumable from the start, even if the first generation fails
         else:
             run.load_checkpoint()
+            if run.state.generation >= config.generations:
+                _log(f"{run_dir} has already run {run.state.generation} generations; nothing to do "
+                     f"(--generations is the total: pass more than {run.state.generation} to continue)")
+                return 0
             _log(f"resuming {run_dir} at generation {run.state.generation} of {config.generations}")
+            run.write_config([parser.prog, *argv])  # records the new settings and the resume command
         _log(f"run folder: {run.run_dir} | environment: {', '.join(config.env_ids)} | parameters: {run.dim} "
              f"| workers: {run.evaluator.workers} | seed: {config.seed}")
-        return run.train()
-    except USER_ERRORS as error:
+        code = run.train()
+        if code == 0:
+            _log(f"done; evaluate with: {run.evaluate_hint()}")
+        return code
+    except (*USER_ERRORS, SaveError) as error:  # SaveError here: before training started
         print(f"{parser.prog}: error: {error}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"{parser.prog}: stopped at once; saved files are intact", file=sys.stderr)
+        resume = f" (resume with: {run.resume_hint()})" if run is not None and run.checkpoint_generation is not None else ""
+        print(f"{parser.prog}: stopped at once; saved files are intact{resume}", file=sys.stderr)
         return 130
     finally:
         if run is not None:
@@ -196,17 +220,61 @@ def evaluation_parser(prog: str, description: str) -> Parser:
     add("--render", type=flag_value, nargs="?", const=True, default=False, metavar="BOOL",
         help="show the episodes in a window (needs a display)")
     add("--video", default=None, metavar="PATH", help="write the first episode to this mp4 file")
+    add("--json", default=None, metavar="PATH",
+        help="also write the statistics (per environment: returns, mean, std, steps, seeds; for ants "
+             "the distances and forward displacements walked) to this JSON file")
+    add("--plot", default=None, metavar="PATH",
+        help="PNG of one episode (first environment, first seed): reward per step, or for ants the "
+             "distance walked, and for Hebbian networks the norm of each layer's weights over time")
     return parser
+
+
+def check_output_file(path: str | None, flag: str) -> None:
+    """Refuse, before any episode runs, an output file that could not be written."""
+    if path is None:
+        return
+    target = Path(path)
+    if target.is_dir():
+        raise UserError(f"{flag} {path}: is a folder; give a file name")
+    parent = target.parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+        raise UserError(f"{flag} {path}: {parent} is not an existing writable folder")
+
+
+def write_evaluation_outputs(args: argparse.Namespace, command: list[str], kind: str, reports, problem,
+                             params) -> None:
+    """The table, then the --json, --plot and --video files the user asked for."""
+    from envs.evaluation import format_table, plot_adaptation, trace_episode, write_video
+    from es.files import write_json
+
+    print(format_table(reports), flush=True)
+    if args.json:
+        write_json(Path(args.json), {"kind": kind, "command": command, "episodes": args.episodes, "seed": args.seed,
+                                     "distance": "ants only: metres between the torso's (x, y) at the start "
+                                                 "and the end of the policy steps; forward: its x component",
+                                     "environments": [report.to_dict() for report in reports]})
+        print(f"statistics: {args.json}")
+    if args.plot:
+        trace = trace_episode(problem, params, args.seed)
+        plot_adaptation(trace, args.plot)
+        print(f"adaptation plot ({trace.env_id}, seed {args.seed}, {len(trace.rewards)} steps): {args.plot}")
+    if args.video:
+        fps = int(problem.envs[0].metadata.get("render_fps") or 30)
+        write_video(args.video, problem.envs[0].frames, fps)
+        print(f"video of the first episode: {args.video}")
 
 
 def evaluate_main(kind: str, parser: Parser, argv: list[str] | None, load_arrays) -> int:
     """Shared body of the evaluate scripts; ``load_arrays(args)`` reads the weight files."""
-    from envs.evaluation import evaluate, record_first_episode, write_video
+    from envs.evaluation import evaluate, record_first_episode
 
-    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    argv = sys.argv[1:] if argv is None else argv
+    args = parser.parse_args(argv)
     problem = None
     try:
         env_ids = resolve_environments(args.environment)
+        for path, flag in ((args.json, "--json"), (args.plot, "--plot"), (args.video, "--video")):
+            check_output_file(path, flag)
         arrays = load_arrays(args)
         spec = ProblemSpec(tuple(env_ids), kind, getattr(args, "hebb_rule", "ABCD_lr"),
                            getattr(args, "init_weights", "uni"))
@@ -216,20 +284,17 @@ def evaluate_main(kind: str, parser: Parser, argv: list[str] | None, load_arrays
             params = problem.policy.load(arrays)
         except ValueError as error:
             raise UserError(str(error)) from None
-        recorder = record_first_episode(problem) if args.video else None
+        if args.video:
+            record_first_episode(problem)
 
-        def show(env_id, episode, seed, result):
-            print(f"{env_id} | episode {episode + 1} | seed {seed} | return {result.total_return:.2f} "
-                  f"| steps {result.steps}", flush=True)
+        def show(report):
+            distance = (f" | distance {report.distances[-1]:.2f} m, forward {report.forward[-1]:.2f} m"
+                        if report.distances else "")
+            print(f"{report.env_id} | episode {len(report.returns)} | seed {report.seeds[-1]} | return "
+                  f"{report.returns[-1]:.2f} | steps {report.steps[-1]}{distance}", flush=True)
 
         reports = evaluate(problem, params, args.episodes, args.seed, on_episode=show)
-        for report in reports:
-            print(f"{report.env_id}: mean return {report.mean:.2f} +- {report.std:.2f} "
-                  f"over {len(report.returns)} episodes")
-        if recorder is not None:
-            fps = int(problem.envs[0].metadata.get("render_fps") or 30)
-            write_video(args.video, recorder.frames, fps)
-            print(f"video of the first episode: {args.video}")
+        write_evaluation_outputs(args, [parser.prog, *argv], kind, reports, problem, params)
         return 0
     except USER_ERRORS as error:
         print(f"{parser.prog}: error: {error}", file=sys.stderr)

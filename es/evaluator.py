@@ -8,8 +8,9 @@
   does not depend on the number of workers or on scheduling.
 
 Failures: an episode that raises, or a worker process that dies (segfault, out of memory), is
-retried once (on a fresh environment, or a fresh process). A second failure of the same task stops
-the evaluation with an ``EvaluationError`` that names the member, the environment and the error.
+retried once (on a fresh environment, or a fresh process) and reported in ``Results.retried``. A
+second failure of the same task stops the evaluation with an ``EvaluationError`` that names the
+member, the environment and the error.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import multiprocessing as mp
 import signal
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from multiprocessing import connection, shared_memory
 from typing import Callable
 
@@ -32,34 +33,45 @@ from es.worker import TaskFailure, Worker, pin_threads
 
 MAX_ATTEMPTS = 2
 CHUNK_SECONDS = 0.1
+CLOSE_SECONDS = 2.0  # how long closing waits for workers to finish before ending them
 
 Progress = Callable[[int, int], None]  # (episodes done, env steps of that episode)
 
 
+def describe_failure(task: np.ndarray, env_ids: tuple[str, ...], how: str, message: str) -> str:
+    """'<env> failed <how> for member <m> (episode seed <s>): <message>'."""
+    member, noise_index, _, env_index, seed = (int(value) for value in task)
+    who = "the unperturbed centre" if noise_index < 0 else f"member {member}"
+    return f"{env_ids[env_index]} failed {how} for {who} (episode seed {seed}): {message}"
+
+
 class EvaluationError(RuntimeError):
+    """A task failed twice; the message names the environment, the member and the error."""
+
     def __init__(self, task: np.ndarray, env_ids: tuple[str, ...], message: str):
-        member, _, _, env_index, seed = (int(value) for value in task)
-        who = "the unperturbed centre" if task[1] < 0 else f"member {member}"
-        super().__init__(f"{env_ids[env_index]} failed twice for {who} (episode seed {seed}): {message}")
+        super().__init__(describe_failure(task, env_ids, "twice", message))
 
 
 @dataclass
 class Results:
     returns: np.ndarray  # float64, task order
     steps: np.ndarray  # int64, task order
+    retried: list[str] = field(default_factory=list)  # one message per episode that failed once
 
 
 class _Attempts:
-    """Counts failures per task; the second one is fatal."""
+    """Counts failures per task: the first is recorded and retried, the second is fatal."""
 
-    def __init__(self, tasks: np.ndarray, env_ids: tuple[str, ...]):
-        self.tasks, self.env_ids = tasks, env_ids
+    def __init__(self, tasks: np.ndarray, env_ids: tuple[str, ...], retried: list[str]):
+        self.tasks, self.env_ids, self.retried = tasks, env_ids, retried
         self.failures = np.zeros(len(tasks), dtype=np.int64)
 
     def failed(self, task_index: int, message: str) -> None:
         self.failures[task_index] += 1
         if self.failures[task_index] >= MAX_ATTEMPTS:
             raise EvaluationError(self.tasks[task_index], self.env_ids, message)
+        self.retried.append(describe_failure(self.tasks[task_index], self.env_ids, "once", message)
+                            + "; retried")
 
 
 class _Generation:
@@ -68,7 +80,7 @@ class _Generation:
     def __init__(self, tasks: np.ndarray, env_ids: tuple[str, ...], progress: Progress | None):
         n_tasks = len(tasks)
         self.results = Results(np.zeros(n_tasks), np.zeros(n_tasks, dtype=np.int64))
-        self.attempts = _Attempts(tasks, env_ids)
+        self.attempts = _Attempts(tasks, env_ids, self.results.retried)
         self.waiting = collections.deque(range(n_tasks))
         self.remaining = n_tasks
         self._progress = progress
@@ -83,6 +95,18 @@ class _Generation:
         self.remaining -= 1
         if self._progress is not None:
             self._progress(1, steps)
+
+
+def chunk_size(n_tasks: int, workers: int, task_seconds: float | None) -> int:
+    """Tasks per hand-out: about CHUNK_SECONDS of work, at most a quarter of a worker's fair share.
+
+    ``task_seconds`` is the last generation's wall time per task per worker (None: no generation
+    yet, so single episodes are handed out).
+    """
+    if task_seconds is None:
+        return 1
+    fair_share = max(1, n_tasks // (4 * workers))
+    return max(1, min(fair_share, math.ceil(CHUNK_SECONDS / max(task_seconds, 1e-6))))
 
 
 class SerialEvaluator:
@@ -176,6 +200,7 @@ class ProcessEvaluator:
         self._dim = dim
         self._theta_memory = shared_memory.SharedMemory(create=True, size=max(dim, 1) * 4)
         self._theta = np.ndarray((dim,), dtype=np.float32, buffer=self._theta_memory.buf)
+        pin_threads()  # here, before the workers (and the fork server) start and load their libraries
         self._context = _context()
         self._slots: list[_Slot] = []
         self._task_seconds: float | None = None
@@ -208,10 +233,7 @@ class ProcessEvaluator:
             raise RuntimeError(f"a worker could not start: {payload}")
 
     def _chunk_size(self, n_tasks: int) -> int:
-        fair_share = max(1, n_tasks // (4 * self.workers))
-        if self._task_seconds is None:  # first generation: hand out single episodes
-            return 1
-        return max(1, min(fair_share, math.ceil(CHUNK_SECONDS / max(self._task_seconds, 1e-6))))
+        return chunk_size(n_tasks, self.workers, self._task_seconds)
 
     def evaluate(self, generation: int, theta: np.ndarray, sigma: float, tasks: np.ndarray,
                  progress: Progress | None = None) -> Results:
@@ -265,16 +287,22 @@ class ProcessEvaluator:
         return fresh
 
     def close(self) -> None:
+        """Ask every worker to stop; after CLOSE_SECONDS in all, end the ones still busy (or stuck)."""
         for slot in self._slots:
             try:
                 slot.conn.send(None)
             except (OSError, ValueError):
                 pass
+        deadline = time.monotonic() + CLOSE_SECONDS
         for slot in self._slots:
-            slot.process.join(timeout=2)
+            slot.process.join(timeout=max(0.0, deadline - time.monotonic()))
+        for slot in self._slots:
             if slot.process.is_alive():
                 slot.process.terminate()
-                slot.process.join(timeout=2)
+                slot.process.join(timeout=CLOSE_SECONDS)
+            if slot.process.is_alive():
+                slot.process.kill()
+                slot.process.join()
             slot.conn.close()
         self._slots = []
         if self._theta_memory is not None:

@@ -24,19 +24,26 @@ from typing import Callable
 
 import numpy as np
 
-from es import files
-from es.evaluator import EvaluationError, ProcessEvaluator, SerialEvaluator
+from es import files, plots
+from es.evaluator import EvaluationError, ProcessEvaluator, Results, SerialEvaluator
 from es.noise import NoiseTable, default_size
+from es.progress import Display, QuietDisplay
 from es.strategy import ESState, OpenES
 from es.worker import make_tasks, perturb
 
 L2_COEFF = 0.01
 SEED_LIMIT = 2**31 - 1
+FAILED = 1
 INTERRUPTED = 130
+RAY_INSTALL_HINT = "install it with: pip install -r requirements-ray.txt (or pip install -e .[ray])"
 
 
 class UserError(ValueError):
     """A problem the user can fix (bad value, missing file); reported in one line, exit code 2."""
+
+
+class SaveError(RuntimeError):
+    """A file of the run could not be written (disk full, folder made read-only); names the file."""
 
 
 @dataclass
@@ -55,11 +62,11 @@ class TrainConfig:
     seed: int = 0
     episodes: int = 1
     backend: str = "process"
+    ray_address: str | None = None  # --backend ray: None starts a local Ray
     hebb_rule: str = "ABCD_lr"
     init_weights: str = "uni"
     distribution: str = "normal"
     noise_size: int | None = None  # default: sized to the parameter count
-    extra: dict = field(default_factory=dict)  # anything a front-end wants recorded
 
     @property
     def workers(self) -> int:
@@ -67,8 +74,9 @@ class TrainConfig:
 
     @property
     def env_label(self) -> str:
-        """The environment part of the original file names (several envs joined by '+')."""
-        return "+".join(part.strip() for part in self.environment.split(","))
+        """The environment part of the original file names: the ids as given, joined by '+',
+        without the ``module:`` part of custom ids (a colon is not portable in file names)."""
+        return "+".join(part.strip().rpartition(":")[2] for part in self.environment.split(",") if part.strip())
 
     @classmethod
     def from_dict(cls, data: dict) -> "TrainConfig":
@@ -104,29 +112,36 @@ def versions() -> dict:
 
 
 class _Interrupts:
-    """First Ctrl-C: finish the generation, save, stop. Second: stop at once."""
+    """First Ctrl-C (or SIGTERM, as a cluster scheduler sends): finish the generation, save, stop.
+    A second one: stop at once."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
     def __init__(self):
         self.requested = False
-        self._previous = None
+        self._previous: dict = {}
 
     def __enter__(self):
-        self._previous = signal.signal(signal.SIGINT, self._handle)
+        self._previous = {signum: signal.signal(signum, self._handle) for signum in self.SIGNALS}
         return self
 
     def __exit__(self, *exc):
-        signal.signal(signal.SIGINT, self._previous)
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)
 
     def _handle(self, signum, frame):
         if self.requested:
             raise KeyboardInterrupt
         self.requested = True
-        print("\ninterrupt: finishing this generation, then saving (Ctrl-C again to stop at once)",
+        name = "interrupt" if signum == signal.SIGINT else signal.Signals(signum).name
+        print(f"\n{name}: finishing this generation, then saving (Ctrl-C again to stop at once)",
               file=sys.stderr, flush=True)
 
 
 @dataclass
-class Progress:
+class History:
+    """What a run has done so far, beyond the strategy state: saved in the checkpoint."""
+
     best_theta: np.ndarray | None = None
     best_center: float = -math.inf
     fitness_log: list[float] = field(default_factory=list)  # the original's Fitness_values file
@@ -138,8 +153,11 @@ class Progress:
 class Run:
     """Owns the run folder, the strategy state and the evaluator for one training run."""
 
-    def __init__(self, config: TrainConfig, spec, run_dir: Path, log: Callable[[str], None] = print):
+    def __init__(self, config: TrainConfig, spec, run_dir: Path, log: Callable[[str], None] = print,
+                 display: Display | None = None):
         self.config, self.spec, self.run_dir, self.log = config, spec, Path(run_dir), log
+        self.display = display or QuietDisplay()  # the live progress line (es.progress)
+        self.checkpoint_generation: int | None = None  # the generation the checkpoint file holds
         problem = spec.build()
         self.policy = problem.policy
         self.dim = self.policy.num_params
@@ -158,7 +176,7 @@ class Run:
         except BaseException:
             self.noise.close()
             raise
-        self.progress = Progress()
+        self.history = History()
         self.state = ESState(self.policy.initial_params(np.random.default_rng([config.seed, 1]),
                                                         config.distribution),
                              config.lr, config.sigma, 0)
@@ -166,23 +184,39 @@ class Run:
     # --- the loop -----------------------------------------------------------------------------
 
     def train(self) -> int:
-        config = self.config
+        """Run generations up to ``config.generations``; the exit code: 0, FAILED or INTERRUPTED."""
         with _Interrupts() as interrupts:
-            while self.state.generation < config.generations:
-                try:
+            try:
+                while self.state.generation < self.config.generations:
                     self._generation()
-                except EvaluationError as error:
-                    self.save_checkpoint()
-                    self.log(f"error: {error}")
-                    self.log(f"stopped; the last checkpoint is in {self.run_dir} ({self.resume_hint()})")
-                    return 1
-                generation = self.state.generation
-                if generation % config.print_every == 0 or generation == config.generations or interrupts.requested:
-                    self.save()
-                if interrupts.requested:
-                    self.log(f"interrupted after generation {generation}; resume with: {self.resume_hint()}")
-                    return INTERRUPTED
+                    if self._save_due() or interrupts.requested:
+                        self.save()
+                    if interrupts.requested:
+                        self.log(f"interrupted after generation {self.state.generation}; "
+                                 f"resume with: {self.resume_hint()}")
+                        return INTERRUPTED
+            except (EvaluationError, SaveError) as error:
+                return self._stop(error)
         return 0
+
+    def _save_due(self) -> bool:
+        generation = self.state.generation
+        return generation % self.config.print_every == 0 or generation == self.config.generations
+
+    def _stop(self, error: EvaluationError | SaveError) -> int:
+        """Report what stopped the run, checkpoint it if that still works, and say how to resume."""
+        self.log(f"error: {error}")
+        if isinstance(error, EvaluationError):
+            try:
+                self.save_checkpoint()
+            except SaveError as save_error:
+                self.log(f"error: {save_error}")
+        if self.checkpoint_generation is None:
+            self.log("stopped; no checkpoint could be written")
+        else:
+            self.log(f"stopped; the checkpoint holds generation {self.checkpoint_generation}; "
+                     f"resume with: {self.resume_hint()}")
+        return FAILED
 
     def _generation(self) -> None:
         config, state, policy = self.config, self.state, self.policy
@@ -195,7 +229,7 @@ class Run:
         tasks = make_tasks(np.arange(population + 1), np.append(indices, -1), np.append(signs, 0),
                            np.concatenate([np.repeat(pair_seeds, 2, axis=0), center_seeds]),
                            len(config.env_ids))
-        results = self.evaluator.evaluate(state.generation, state.theta, state.sigma, tasks)
+        results = self._evaluate(tasks)
         returns = results.returns.reshape(population + 1, -1).mean(axis=1)
         member_returns, center_return = returns[:population], float(returns[population])
         fitness = member_returns - L2_COEFF * l2_penalties(state.theta, self.noise, indices, signs,
@@ -203,15 +237,25 @@ class Run:
         finite = np.isfinite(fitness)
         fitness[~finite] = -np.inf  # NaN or infinite returns are ranked last, never stepped on
         self.state, info = self.strategy.tell(state, self.noise, indices, fitness)
-        if np.isfinite(center_return) and center_return > self.progress.best_center:
-            self.progress.best_center, self.progress.best_theta = center_return, state.theta
+        if np.isfinite(center_return) and center_return > self.history.best_center:
+            self.history.best_center, self.history.best_theta = center_return, state.theta
         self._record(state, fitness[finite], member_returns[finite], center_return, info,
                      int((~finite).sum()), int(results.steps.sum()), time.perf_counter() - started)
 
+    def _evaluate(self, tasks: np.ndarray) -> Results:
+        """The generation's episodes, under the live progress line; retried failures are reported."""
+        state = self.state
+        generations_after = self.config.generations - state.generation - 1
+        with self.display.generation(state.generation + 1, len(tasks), generations_after) as progress:
+            results = self.evaluator.evaluate(state.generation, state.theta, state.sigma, tasks, progress=progress)
+        for message in results.retried:
+            self.log(f"warning: {message}")
+        return results
+
     def _record(self, before: ESState, fitness, returns, center_return, info, nonfinite, steps, seconds):
-        progress, after = self.progress, self.state
-        progress.total_steps += steps
-        progress.total_seconds += seconds
+        history, after = self.history, self.state
+        history.total_steps += steps
+        history.total_seconds += seconds
         mean = float(fitness.mean()) if fitness.size else math.nan
         row = dict(generation=after.generation, fitness_mean=mean,
                    fitness_max=float(fitness.max()) if fitness.size else math.nan,
@@ -220,12 +264,12 @@ class Run:
                    return_mean=float(returns.mean()) if returns.size else math.nan,
                    center_return=center_return, sigma=after.sigma, lr=after.lr,
                    update_factor=info["update_factor"], skipped=int(info["skipped"]), nonfinite=nonfinite,
-                   env_steps=steps, total_env_steps=progress.total_steps, seconds=round(seconds, 3),
-                   total_seconds=round(progress.total_seconds, 3))
-        progress.metrics.append(row)
+                   env_steps=steps, total_env_steps=history.total_steps, seconds=round(seconds, 3),
+                   total_seconds=round(history.total_seconds, 3))
+        history.metrics.append(row)
         if after.generation % self.config.print_every == 0:
-            progress.fitness_log.append(mean)
-        files.write_metrics(self.run_dir / "metrics.csv", progress.metrics)
+            history.fitness_log.append(mean)
+        self._write(files.write_metrics, "metrics.csv", history.metrics)
         self.log(self._line(row, after))
 
     def _line(self, row: dict, after: ESState) -> str:
@@ -256,36 +300,50 @@ class Run:
                 for role, array in arrays.items()}
 
     def save(self) -> None:
-        """The original's files for this generation, best/last, the fitness log, the checkpoint."""
-        progress, state = self.progress, self.state
-        mean = progress.metrics[-1]["fitness_mean"] if progress.metrics else math.nan
+        """The original's files for this generation, best/last, the fitness log and picture, and
+        last the checkpoint: a save cut short leaves the previous checkpoint to resume from."""
+        history, state = self.history, self.state
+        mean = float(history.metrics[-1]["fitness_mean"]) if history.metrics else math.nan
         reward = int(mean) if np.isfinite(mean) else 0
         for name, array in self.original_files(state.theta, reward, state.generation - 1).items():
-            files.save_dat(self.run_dir / name, array)
+            self._write(files.save_dat, name, array)
         self._save_named("last", state.theta)
-        if progress.best_theta is not None:
-            self._save_named("best", progress.best_theta)
+        if history.best_theta is not None:
+            self._save_named("best", history.best_theta)
         run_id = self.run_dir.name
-        files.save_npy(self.run_dir / files.fitness_file_name(run_id, self.config.env_label),
-                       np.array(progress.fitness_log))
+        self._write(files.save_npy, files.fitness_file_name(run_id, self.config.env_label),
+                    np.array(history.fitness_log))
+        self._write(plots.save_run_plot, "fitness.png", history.metrics, run_id)
         self.save_checkpoint()
 
     def _save_named(self, prefix: str, theta: np.ndarray) -> None:
         arrays = self.policy.export(theta)
         for role, array in arrays.items():
-            name = f"{prefix}.dat" if role == "weights" else f"{prefix}_{role}.dat"
-            files.save_dat(self.run_dir / name, array)
+            self._write(files.save_dat, f"{prefix}.dat" if role == "weights" else f"{prefix}_{role}.dat", array)
+
+    def _write(self, write: Callable, name: str, *args) -> None:
+        """``write(run_dir / name, *args)``; an OSError becomes a SaveError naming the file.
+
+        Every writer in ``es.files`` is atomic, so a failed write leaves the earlier file whole.
+        """
+        path = self.run_dir / name
+        try:
+            write(path, *args)
+        except OSError as error:
+            raise SaveError(f"cannot write {path}: {error.strerror or error}") from None
 
     def save_checkpoint(self) -> None:
-        state, progress = self.state, self.progress
+        state, history = self.state, self.history
         buffer = io.BytesIO()
         np.savez(buffer, theta=state.theta, lr=state.lr, sigma=state.sigma, generation=state.generation,
-                 best_theta=progress.best_theta if progress.best_theta is not None else np.zeros(0, np.float32),
-                 best_center=progress.best_center, fitness_log=np.array(progress.fitness_log),
-                 total_steps=progress.total_steps, total_seconds=progress.total_seconds)
-        files.atomic_write_bytes(self.run_dir / "checkpoint.npz", buffer.getvalue())
+                 best_theta=history.best_theta if history.best_theta is not None else np.zeros(0, np.float32),
+                 best_center=history.best_center, fitness_log=np.array(history.fitness_log),
+                 total_steps=history.total_steps, total_seconds=history.total_seconds)
+        self._write(files.atomic_write_bytes, "checkpoint.npz", buffer.getvalue())
+        self.checkpoint_generation = state.generation
 
     def load_checkpoint(self) -> None:
+        """Continue from the run folder's checkpoint; metrics rows after it are dropped."""
         path = self.run_dir / "checkpoint.npz"
         try:
             with np.load(path) as saved:
@@ -295,7 +353,7 @@ class Run:
                 self.state = ESState(theta.astype(np.float32), float(saved["lr"]), float(saved["sigma"]),
                                      int(saved["generation"]))
                 best = saved["best_theta"]
-                self.progress = Progress(best if best.size else None, float(saved["best_center"]),
+                self.history = History(best if best.size else None, float(saved["best_center"]),
                                          [float(value) for value in saved["fitness_log"]], [],
                                          int(saved["total_steps"]), float(saved["total_seconds"]))
         except (OSError, KeyError, ValueError) as error:
@@ -304,17 +362,42 @@ class Run:
             raise UserError(f"cannot resume from {path}: {error}") from None
         metrics_path = self.run_dir / "metrics.csv"
         rows = files.read_metrics(metrics_path) if metrics_path.exists() else []
-        self.progress.metrics = [row for row in rows if int(row["generation"]) <= self.state.generation]
+        self.history.metrics = [row for row in rows if int(row["generation"]) <= self.state.generation]
+        self.checkpoint_generation = self.state.generation
+        self._remove_stale_temporaries()
+
+    def _remove_stale_temporaries(self) -> None:
+        """Delete the temporary files of saves that a kill cut short (``es.files``: ``.<name>.*.tmp``)."""
+        for path in self.run_dir.glob(".*.tmp"):
+            path.unlink(missing_ok=True)
 
     def resume_hint(self) -> str:
         script = "train_hebb.py" if self.config.kind == "hebbian" else "train_static.py"
         return f"python {script} --resume {self.run_dir}"
 
+    def evaluate_hint(self) -> str:
+        """The command that evaluates this run's best parameters over 10 episodes."""
+        prefix = "best" if self.history.best_theta is not None else "last"
+        config, directory = self.config, self.run_dir
+        if config.kind == "static":
+            return (f"python evaluate_static.py --environment {config.environment} "
+                    f"--path_weights {directory / f'{prefix}.dat'} --episodes 10")
+        roles = [role for role in self.policy.export(self.state.theta) if role != "coeffs"]
+        coevolved = f" --path_coev {directory / f'{prefix}_{roles[0]}.dat'}" if roles else ""
+        return (f"python evaluate_hebb.py --environment {config.environment} --hebb_rule {config.hebb_rule} "
+                f"--init_weights {config.init_weights} --path_hebb {directory / f'{prefix}_coeffs.dat'}"
+                f"{coevolved} --episodes 10")
+
     def write_config(self, argv: list[str]) -> None:
+        """config.json; a resume keeps the first command and lists its own under "resumed"."""
         data = asdict(self.config)
-        data.update(command=" ".join(argv), versions=versions(), num_params=self.dim,
-                    layout=self.policy.layout.describe(), workers=self.evaluator.workers)
-        files.write_json(self.run_dir / "config.json", data)
+        path = self.run_dir / "config.json"
+        earlier = files.read_json(path) if path.exists() else {}
+        command = " ".join(argv)
+        resumed = earlier.get("resumed", []) + ([command] if earlier else [])
+        data.update(command=earlier.get("command", command), resumed=resumed, versions=versions(),
+                    num_params=self.dim, layout=self.policy.layout.describe(), workers=self.evaluator.workers)
+        self._write(files.write_json, "config.json", data)
 
     def close(self) -> None:
         self.evaluator.close()
@@ -322,9 +405,19 @@ class Run:
 
 
 def make_parallel_evaluator(config: TrainConfig, spec, noise: NoiseTable, dim: int, env_ids: tuple[str, ...]):
+    """The evaluator of ``config.backend`` for ``config.workers`` > 1."""
     if config.backend == "process":
         return ProcessEvaluator(spec.build, noise, dim, env_ids, config.workers)
-    raise UserError(f"unknown backend {config.backend!r}; valid backends: process")
+    if config.backend == "ray":
+        try:
+            from es.ray_backend import RayEvaluator
+        except ModuleNotFoundError as error:
+            if error.name != "ray":
+                raise
+            raise UserError(f"--backend ray needs Ray, which is not installed; {RAY_INSTALL_HINT}") from None
+        workers = None if config.threads == -1 else config.threads  # -1: one per CPU Ray reports
+        return RayEvaluator(spec.build, noise, dim, env_ids, workers, config.ray_address)
+    raise UserError(f"unknown backend {config.backend!r}; valid backends: process, ray")
 
 
 def new_run_dir(folder: str | Path, label: str, seed: int) -> Path:

@@ -35,7 +35,11 @@ def make_tasks(members: np.ndarray, noise_indices: np.ndarray, signs: np.ndarray
 
 
 def pin_threads() -> None:
-    """One BLAS/OpenMP/torch thread per worker: the pool provides the parallelism."""
+    """One BLAS/OpenMP thread per worker: the pool provides the parallelism.
+
+    Libraries read these when they load, so they must be set before a worker process starts
+    (child processes inherit them); torch's own setting is made where torch is used.
+    """
     for variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
         os.environ[variable] = "1"
 

@@ -1,0 +1,93 @@
+"""Learning curves from ``metrics.csv``: a run's own ``fitness.png``, and several runs overlaid.
+
+Fitness is what the strategy ranks: the mean episode return minus the L2 penalty (``es.run``).
+One run's picture shows, per generation, the population's mean, the band between its min and
+max, the best fitness seen so far, and the return of the unperturbed centre theta (the one that
+picks ``best.dat``). The comparison overlays the mean and best-so-far of several runs.
+
+Drawing uses matplotlib's Agg canvas directly (no pyplot, so no global state and no display), and
+the PNG is written atomically like every other file of a run.
+"""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from es import files
+
+WIDTH, HEIGHT, DPI = 8, 4.5, 100
+
+
+def curves(rows: Sequence[dict]) -> dict[str, np.ndarray]:
+    """Columns of metrics rows (as written, or as read back from the CSV) as float arrays."""
+    def column(name: str) -> np.ndarray:
+        return np.array([float(row[name]) for row in rows], dtype=np.float64)
+
+    maximum = column("fitness_max")
+    return {"generation": column("generation"), "mean": column("fitness_mean"), "max": maximum,
+            "min": column("fitness_min"), "center": column("center_return"),
+            "best": np.fmax.accumulate(maximum) if maximum.size else maximum}  # fmax skips NaN
+
+
+def _figure(title: str):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=(WIDTH, HEIGHT), dpi=DPI)
+    FigureCanvasAgg(figure)
+    axes = figure.add_subplot()
+    axes.set_title(title, fontsize=10)
+    axes.set_xlabel("generation")
+    axes.set_ylabel("fitness")
+    axes.grid(alpha=0.3)
+    return figure, axes
+
+
+def _legend_outside(axes) -> None:
+    """To the right of the axes, where it never hides a curve."""
+    axes.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+
+
+def run_figure(rows: Sequence[dict], title: str):
+    """One run: mean, min-max band, best so far, centre return."""
+    figure, axes = _figure(title)
+    data = curves(rows)
+    x = data["generation"]
+    axes.fill_between(x, data["min"], data["max"], color="C0", alpha=0.2, linewidth=0,
+                      label="population min-max")
+    axes.plot(x, data["mean"], color="C0", label="population mean")
+    axes.plot(x, data["best"], color="C3", linestyle="--", label="best so far")
+    axes.plot(x, data["center"], color="C2", linestyle=":", label="centre return")
+    _legend_outside(axes)
+    return figure
+
+
+def comparison_figure(runs: Sequence[tuple[str, Sequence[dict]]]):
+    """Several runs: each one's mean (solid) and best so far (dashed) in its own colour."""
+    figure, axes = _figure("mean (solid) and best so far (dashed)")
+    for number, (label, rows) in enumerate(runs):
+        data, colour = curves(rows), f"C{number % 10}"
+        axes.plot(data["generation"], data["mean"], color=colour, label=label)
+        axes.plot(data["generation"], data["best"], color=colour, linestyle="--")
+    _legend_outside(axes)
+    return figure
+
+
+def write_png(figure, path: Path) -> None:
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", bbox_inches="tight")
+    files.atomic_write_bytes(Path(path), buffer.getvalue())
+
+
+def save_run_plot(path: Path, rows: Sequence[dict], title: str) -> None:
+    """Write one run's learning curve to ``path`` (its ``fitness.png``)."""
+    write_png(run_figure(rows, title), path)
+
+
+def save_comparison(path: Path, runs: Sequence[tuple[str, Sequence[dict]]]) -> None:
+    """Overlay several runs, given as (label, metrics rows), in one picture at ``path``."""
+    write_png(comparison_figure(runs), path)

@@ -1,0 +1,154 @@
+"""Resume: a run stopped and resumed is bit-for-bit the run that never stopped; kills never corrupt it."""
+
+from __future__ import annotations
+
+import os
+import random
+import re
+import signal
+import time
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+import train_static
+from envs import ProblemSpec
+from es import run as run_module
+from es.run import Run, TrainConfig, new_run_dir
+from tests.run_helpers import Training, assert_same_run, descendants, only_run, still_running
+
+CARTPOLE = ("--environment", "CartPole-v1", "--popsize", "8", "--seed", "5")
+
+
+def train(*argv: str) -> int:
+    return train_static.main(list(argv))
+
+
+@pytest.fixture(scope="module")
+def straight_run(tmp_path_factory):
+    """4 generations without a stop."""
+    folder = tmp_path_factory.mktemp("straight")
+    assert train(*CARTPOLE, "--threads", "1", "--generations", "4", "--folder", str(folder)) == 0
+    return only_run(folder)
+
+
+def test_resumed_run_matches_an_uninterrupted_one(tmp_path, straight_run):
+    assert train(*CARTPOLE, "--threads", "1", "--generations", "2", "--folder", str(tmp_path)) == 0
+    split = only_run(tmp_path)
+    assert train("--resume", str(split), "--generations", "4") == 0
+    assert_same_run(straight_run, split)
+
+
+def test_ctrl_c_finishes_the_generation_and_the_resumed_run_matches(tmp_path):
+    """SIGINT to the whole process group, as a terminal sends it: workers ignore it, the run saves."""
+    training = Training(*CARTPOLE, "--threads", "2", "--generations", "1000", "--folder", str(tmp_path / "cut"))
+    try:
+        training.wait_for("iter 1 ")
+        workers = descendants(training.process.pid)
+        os.killpg(training.process.pid, signal.SIGINT)
+        assert training.finish() == 130
+    finally:
+        training.kill()
+    assert len(workers) >= 2 and still_running(workers) == set()
+    run_dir = only_run(tmp_path / "cut")
+    last = training.stdout[-1]
+    found = re.fullmatch(r"interrupted after generation (\d+); resume with: python train_static.py --resume (.+)", last)
+    assert found and found.group(2) == str(run_dir), training.stdout
+    stopped = int(found.group(1))
+    assert train("--resume", str(run_dir), "--generations", str(stopped + 1), "--threads", "1") == 0
+    assert train(*CARTPOLE, "--threads", "1", "--generations", str(stopped + 1),
+                 "--folder", str(tmp_path / "straight")) == 0
+    assert_same_run(only_run(tmp_path / "straight"), run_dir)
+
+
+def test_kill_9_of_the_run_takes_its_workers_and_leaves_a_resumable_checkpoint(tmp_path):
+    training = Training(*CARTPOLE, "--threads", "2", "--generations", "1000", "--folder", str(tmp_path))
+    try:
+        training.wait_for("iter 1 ")
+        workers = descendants(training.process.pid)
+        training.process.kill()  # the main process only: its workers must follow it
+        training.finish()
+    finally:
+        training.kill()
+    assert len(workers) >= 2 and still_running(workers) == set()
+    run_dir = only_run(tmp_path)
+    with np.load(run_dir / "checkpoint.npz") as saved:  # generation 0 or 1, whichever was saved last
+        reached = int(saved["generation"])
+    assert train("--resume", str(run_dir), "--generations", str(reached + 1), "--threads", "1") == 0
+
+
+def _save_forever(run: Run) -> None:
+    """In a forked child: checkpoints of generation g hold theta == g everywhere, until killed."""
+    try:
+        generation = run.state.generation
+        while True:
+            generation += 1
+            run.state = replace(run.state, theta=np.full(run.dim, generation, np.float32), generation=generation)
+            run.save_checkpoint()
+    finally:
+        os._exit(1)
+
+
+def test_kill_9_during_saves_always_leaves_a_loadable_checkpoint(tmp_path):
+    config = TrainConfig(kind="static", environment="CartPole-v1", env_ids=["CartPole-v1"], popsize=4, threads=1)
+    run = Run(config, ProblemSpec(("CartPole-v1",)), tmp_path, log=lambda line: None)
+    delays = random.Random(0)
+    try:
+        run.save_checkpoint()
+        for _ in range(15):
+            child = os.fork()
+            if child == 0:
+                _save_forever(run)
+            time.sleep(delays.uniform(0.002, 0.04))
+            os.kill(child, signal.SIGKILL)
+            os.waitpid(child, 0)
+            run.load_checkpoint()  # also clears the temporary file of a save the kill cut short (most kills do)
+            assert np.all(run.state.theta == run.state.generation)
+            assert not list(tmp_path.glob(".*.tmp"))
+    finally:
+        run.close()
+
+
+def test_resume_continues_a_run_that_stopped_with_an_error(tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("FAILING_ENV_STEP", "3")
+    monkeypatch.setenv("FAILING_ENV_HOW", "raise")
+    failing = ("--environment", "tests.failing_env:FailingEnv-v0", "--popsize", "4", "--seed", "2", "--threads", "1")
+    assert train(*failing, "--generations", "2", "--folder", str(tmp_path)) == 1
+    run_dir = only_run(tmp_path)
+    assert f"stopped; the checkpoint holds generation 0; resume with: python train_static.py --resume {run_dir}" \
+        in capsys.readouterr().out
+    monkeypatch.delenv("FAILING_ENV_STEP")  # the environment is repaired
+    assert train("--resume", str(run_dir)) == 0
+    assert [line.split(" |")[0] for line in capsys.readouterr().out.splitlines() if line.startswith("iter")] \
+        == ["iter 1", "iter 2"]
+
+
+def test_resuming_a_finished_run_says_there_is_nothing_to_do(tmp_path, capsys):
+    assert train(*CARTPOLE, "--threads", "1", "--generations", "1", "--folder", str(tmp_path)) == 0
+    assert train("--resume", str(only_run(tmp_path)), "--generations", "1") == 0
+    assert "nothing to do" in capsys.readouterr().out
+
+
+def test_resume_refuses_a_folder_that_is_not_a_run(tmp_path, capsys):
+    assert train("--resume", str(tmp_path)) == 2
+    assert capsys.readouterr().err.strip().endswith("not a run folder (needs config.json and checkpoint.npz)")
+
+
+def test_runs_started_in_the_same_second_get_different_folders(tmp_path, monkeypatch):
+    monkeypatch.setattr(run_module.time, "strftime", lambda pattern: "20250101-120000")
+    folders = [new_run_dir(tmp_path, "CartPole-v1", 1) for _ in range(3)]
+    assert [folder.name for folder in folders] == ["20250101-120000_CartPole-v1_seed1",
+                                                    "20250101-120000_CartPole-v1_seed1-2",
+                                                    "20250101-120000_CartPole-v1_seed1-3"]
+
+
+def test_metrics_rows_after_the_checkpoint_are_dropped_on_resume(tmp_path, straight_run):
+    """A kill between writing metrics.csv and the checkpoint: the resume redoes that generation."""
+    assert train(*CARTPOLE, "--threads", "1", "--generations", "2", "--folder", str(tmp_path)) == 0
+    run_dir = only_run(tmp_path)
+    checkpoint_2 = (run_dir / "checkpoint.npz").read_bytes()
+    assert train("--resume", str(run_dir), "--generations", "3") == 0
+    (run_dir / "checkpoint.npz").write_bytes(checkpoint_2)  # as if killed before checkpoint 3 was written
+    assert train("--resume", str(run_dir), "--generations", "4") == 0
+    assert_same_run(straight_run, run_dir)
