@@ -239,7 +239,7 @@ class Run:
         self.state, info = self.strategy.tell(state, self.noise, indices, fitness)
         if np.isfinite(center_return) and center_return > self.history.best_center:
             self.history.best_center, self.history.best_theta = center_return, state.theta
-        self._record(state, fitness[finite], member_returns[finite], center_return, info,
+        self._record(fitness[finite], member_returns[finite], center_return, info,
                      int((~finite).sum()), int(results.steps.sum()), time.perf_counter() - started)
 
     def _evaluate(self, tasks: np.ndarray) -> Results:
@@ -252,17 +252,19 @@ class Run:
             self.log(f"warning: {message}")
         return results
 
-    def _record(self, before: ESState, fitness, returns, center_return, info, nonfinite, steps, seconds):
+    def _record(self, fitness, returns, center_return, info, nonfinite, steps, seconds):
+        """Append the generation's metrics row, rewrite metrics.csv, print the generation's line."""
         history, after = self.history, self.state
         history.total_steps += steps
         history.total_seconds += seconds
-        mean = float(fitness.mean()) if fitness.size else math.nan
-        row = dict(generation=after.generation, fitness_mean=mean,
-                   fitness_max=float(fitness.max()) if fitness.size else math.nan,
-                   fitness_min=float(fitness.min()) if fitness.size else math.nan,
-                   fitness_std=float(fitness.std()) if fitness.size else math.nan,
-                   return_mean=float(returns.mean()) if returns.size else math.nan,
-                   center_return=center_return, sigma=after.sigma, lr=after.lr,
+
+        def stat(values: np.ndarray, reduce) -> float:  # finite values only; NaN if there are none
+            return float(reduce(values)) if values.size else math.nan
+
+        mean = stat(fitness, np.mean)
+        row = dict(generation=after.generation, fitness_mean=mean, fitness_max=stat(fitness, np.max),
+                   fitness_min=stat(fitness, np.min), fitness_std=stat(fitness, np.std),
+                   return_mean=stat(returns, np.mean), center_return=center_return, sigma=after.sigma, lr=after.lr,
                    update_factor=info["update_factor"], skipped=int(info["skipped"]), nonfinite=nonfinite,
                    env_steps=steps, total_env_steps=history.total_steps, seconds=round(seconds, 3),
                    total_seconds=round(history.total_seconds, 3))
