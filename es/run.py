@@ -378,8 +378,11 @@ class Run:
         return f"python {script} --resume {self.run_dir}"
 
     def evaluate_hint(self) -> str:
-        """The command that evaluates this run's best parameters over 10 episodes."""
-        prefix = "best" if self.history.best_theta is not None else "last"
+        """The command that evaluates this run's final parameters over 10 episodes.
+
+        Not ``best``: that is the centre with the best single-episode return, a noisy choice.
+        """
+        prefix = "last"
         config, directory = self.config, self.run_dir
         if config.kind == "static":
             return (f"python evaluate_static.py --environment {config.environment} "
