@@ -5,15 +5,14 @@
     python benchmarks/throughput.py --environment HalfCheetah-v5 --policy hebbian --hebb_rule ABCD_lr
     python benchmarks/throughput.py --environment AntBulletEnv-v0 --policy static --scaling
 
-The training rate is env steps per second per worker of the real evaluation path (the
-evaluator, its worker, the recipe's wrappers, the policy, the rollout) on a generation of tasks.
-The raw rate is ``env.step`` of a plain ``gym.make`` environment replaying exactly the actions
-those episodes sent to the environment, from the same seeds: the same trajectories, so the
-comparison isolates what the training loop adds (a simulator's step time depends on the state:
-a policy that saturates its actions makes MuJoCo slower than random actions do). Both are
-measured in alternating rounds, in CPU time of this process when the loop runs in it
-(--threads 1), and the medians compared, so that the machine's drift (about +-40 % here) and
-other load cancel out. --scaling measures wall time, as it must. Targets (issues 2 and 3):
+The ratio compares, over the same episodes, the real evaluation path (the evaluator, its worker,
+the recipe's wrappers, the policy, the rollout) with ``env.step`` of a plain ``gym.make``
+environment replaying exactly the actions those episodes sent, from the same seeds: the same
+trajectories, so it isolates what the training loop adds (a simulator's step time depends on the
+state: a policy that saturates its actions makes MuJoCo slower than random actions do). The two
+alternate episode by episode and are timed in CPU time of this process, so that the machine's
+drift (about +-40 % here) and other load cancel out; the median over rounds is printed.
+--scaling compares generations with 1 and 2 worker processes, in wall time. Targets (issues 2, 3):
 static MLP on HalfCheetah-v5 >= 0.85, Hebbian ABCD_lr >= 0.70 on HalfCheetah-v5 and >= 0.90 on
 AntBulletEnv-v0 (--threads 1); 1 -> 2 workers on AntBulletEnv-v0 >= 1.8x (--scaling).
 """
@@ -46,18 +45,11 @@ def generation_tasks(population: int, dim: int, noise: NoiseTable, rng: np.rando
     return make_tasks(np.arange(population), indices, signs, seeds, 1)
 
 
-def clock(workers: int):
-    """CPU time of this process when everything runs in it (immune to other load on the
-    machine), wall time when worker processes do the work."""
-    return time.process_time if workers == 1 else time.perf_counter
-
-
 def training_rate(evaluator, theta: np.ndarray, sigma: float, tasks: np.ndarray) -> float:
-    """Env steps per second per worker over one generation of the real evaluation path."""
-    now = clock(evaluator.workers)
-    started = now()
+    """Env steps per second per worker over one generation of the real evaluation path (wall time)."""
+    started = time.perf_counter()
     results = evaluator.evaluate(0, theta, sigma, tasks)
-    return results.steps.sum() / (now() - started) / evaluator.workers
+    return results.steps.sum() / (time.perf_counter() - started) / evaluator.workers
 
 
 def record_actions(evaluator: SerialEvaluator, theta: np.ndarray, sigma: float, tasks: np.ndarray):
@@ -79,17 +71,13 @@ def record_actions(evaluator: SerialEvaluator, theta: np.ndarray, sigma: float, 
     return episodes
 
 
-def raw_rate(env: gym.Env, episodes) -> float:
-    """env.step calls per second replaying recorded episodes (resets excluded)."""
-    elapsed, steps = 0.0, 0
-    for seed, actions in episodes:
-        env.reset(seed=seed)
-        started = time.process_time()
-        for action in actions:
-            env.step(action)
-        elapsed += time.process_time() - started
-        steps += len(actions)
-    return steps / elapsed
+def replay(env: gym.Env, seed: int, actions: list[np.ndarray]) -> float:
+    """CPU seconds of ``env.step`` over one recorded episode (the reset excluded)."""
+    env.reset(seed=seed)
+    started = time.process_time()
+    for action in actions:
+        env.step(action)
+    return time.process_time() - started
 
 
 def build(spec: ProblemSpec, workers: int, noise: NoiseTable, dim: int):
@@ -98,30 +86,50 @@ def build(spec: ProblemSpec, workers: int, noise: NoiseTable, dim: int):
     return ProcessEvaluator(spec.build, noise, dim, spec.env_ids, workers)
 
 
-def measure(args, spec: ProblemSpec, workers: int) -> tuple[list[float], list[float]]:
+def setup(args, spec: ProblemSpec, workers: int):
     problem = spec.build()
-    policy = problem.policy
-    theta = policy.initial_params(np.random.default_rng(0), "normal")
+    theta = problem.policy.initial_params(np.random.default_rng(0), "normal")
     problem.close()
     noise = NoiseTable.create(0, max(1 << 20, 4 * theta.size), shared=workers > 1)
     evaluator = build(spec, workers, noise, theta.size)
+    tasks = generation_tasks(args.popsize, theta.size, noise, np.random.default_rng(1))
+    training_rate(evaluator, theta, args.sigma, tasks)  # warm-up: compilation, first resets
+    return evaluator, noise, theta, tasks
+
+
+def measure_ratio(args, spec: ProblemSpec) -> list[float]:
+    """Per round, training time / raw time over the same episodes, alternating episode by episode
+    so that both see the same moments of the machine's drift."""
+    evaluator, noise, theta, tasks = setup(args, spec, 1)
     with quiet_output():
         raw_env = gym.make(spec.env_ids[0])
         raw_env.reset(seed=0)
-    tasks = generation_tasks(args.popsize, theta.size, noise, np.random.default_rng(1))
-    raw, trained = [], []
+    ratios = []
     try:
-        training_rate(evaluator, theta, args.sigma, tasks)  # warm-up: JIT, first resets
-        episodes = record_actions(evaluator, theta, args.sigma, tasks) if workers == 1 else []
+        episodes = record_actions(evaluator, theta, args.sigma, tasks)
         for _ in range(args.rounds):
-            if episodes:
-                raw.append(raw_rate(raw_env, episodes))
-            trained.append(training_rate(evaluator, theta, args.sigma, tasks))
+            raw_seconds = trained_seconds = 0.0
+            for task, (seed, actions) in zip(tasks, episodes):
+                raw_seconds += replay(raw_env, seed, actions)
+                started = time.process_time()
+                evaluator.evaluate(0, theta, args.sigma, task[None])
+                trained_seconds += time.process_time() - started
+            ratios.append(raw_seconds / trained_seconds)
     finally:
         evaluator.close()
         noise.close()
         raw_env.close()
-    return raw, trained
+    return ratios
+
+
+def measure_rate(args, spec: ProblemSpec, workers: int) -> list[float]:
+    """Training env steps per second per worker, one value per round (wall time)."""
+    evaluator, noise, theta, tasks = setup(args, spec, workers)
+    try:
+        return [training_rate(evaluator, theta, args.sigma, tasks) for _ in range(args.rounds)]
+    finally:
+        evaluator.close()
+        noise.close()
 
 
 def main() -> int:
@@ -130,7 +138,6 @@ def main() -> int:
     parser.add_argument("--policy", choices=("static", "hebbian"), default="static")
     parser.add_argument("--hebb_rule", default="ABCD_lr")
     parser.add_argument("--init_weights", default="uni")
-    parser.add_argument("--threads", type=int, default=1, help="workers of the training loop")
     parser.add_argument("--scaling", action="store_true", help="compare 1 and 2 workers instead")
     parser.add_argument("--popsize", type=int, default=8, help="episodes per measured generation")
     parser.add_argument("--sigma", type=float, default=0.1)
@@ -140,17 +147,13 @@ def main() -> int:
     spec = ProblemSpec((env_id,), args.policy, args.hebb_rule, args.init_weights)
     label = f"{env_id}, {args.policy}" + (f" {args.hebb_rule}" if args.policy == "hebbian" else "")
     if args.scaling:
-        _, one = measure(args, spec, 1)
-        _, two = measure(args, spec, 2)
-        speedup = 2 * statistics.median(two) / statistics.median(one)
-        print(f"{label}: 1 worker {statistics.median(one):,.0f} steps/s, 2 workers "
-              f"{2 * statistics.median(two):,.0f} steps/s in total")
-        print(f"speed-up 1 -> 2 workers: {speedup:.2f}x")
+        one = statistics.median(measure_rate(args, spec, 1))
+        two = statistics.median(measure_rate(args, spec, 2))
+        print(f"{label}: 1 worker {one:,.0f} steps/s, 2 workers {2 * two:,.0f} steps/s in total")
+        print(f"speed-up 1 -> 2 workers: {2 * two / one:.2f}x")
         return 0
-    raw, trained = measure(args, spec, args.threads)
-    ratios = [t / r for t, r in zip(trained, raw)]
-    print(f"{label}, {args.threads} worker(s): raw env.step {statistics.median(raw):,.0f} steps/s, "
-          f"training loop {statistics.median(trained):,.0f} steps/s per worker")
+    ratios = measure_ratio(args, spec)
+    print(f"{label}, 1 worker: training loop / raw env.step, same episodes")
     print(f"ratio training / raw: {statistics.median(ratios):.3f} (rounds: "
           + ", ".join(f"{ratio:.2f}" for ratio in ratios) + ")")
     return 0
