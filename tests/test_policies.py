@@ -22,25 +22,12 @@ from policies.init import INIT_WEIGHTS
 from policies.network import NetworkSpec
 from policies.rules import RULES
 from policies.static import StaticPolicy
+from tests.rule_equations import EQUATIONS
 
 MLP = NetworkSpec((5,), 3)
 PIXELS = NetworkSpec((3, 84, 84), 3)
 CAR = PIXELS
 ANT = NetworkSpec((28,), 8)
-
-# Spec §4.1: Delta w_ij from the synapse's coefficient row h; here h[c] is a whole layer's column c.
-EQUATIONS = {
-    "A": lambda h, o_i, o_j: h[0] * o_i * o_j,
-    "AD": lambda h, o_i, o_j: h[0] * o_i * o_j + h[1],
-    "AD_lr": lambda h, o_i, o_j: h[2] * (h[0] * o_i * o_j + h[1]),
-    "ABC": lambda h, o_i, o_j: h[0] * o_i * o_j + h[1] * o_i + h[2] * o_j,
-    "ABC_lr": lambda h, o_i, o_j: h[3] * (h[0] * o_i * o_j + h[1] * o_i + h[2] * o_j),
-    "ABCD": lambda h, o_i, o_j: h[3] + h[0] * o_i * o_j + h[1] * o_i + h[2] * o_j,
-    "ABCD_lr": lambda h, o_i, o_j: h[3] * (h[0] * o_i * o_j + h[1] * o_i + h[2] * o_j + h[4]),
-    "ABCD_lr_D_out": lambda h, o_i, o_j: h[3] * (h[0] * o_i * o_j + h[1] * o_i + h[2] * o_j) + h[4],
-    "ABCD_lr_D_in_and_out": lambda h, o_i, o_j: h[3] * (h[0] * o_i * o_j + h[1] * o_i + h[2] * o_j + h[4]) + h[5],
-}
-
 
 def reference_episode(rule, coeffs, weights, observations, squash_out, normalise):
     """Spec §4.2-4.3 in float64: act, then update every layer, then divide each by its max |w|.

@@ -10,19 +10,7 @@ import numpy as np
 import pytest
 
 from policies.rules import RULES, get_rule
-
-# Delta w_ij of each rule, spelled out as in the spec's table; h is the synapse's coefficient row.
-EQUATIONS = {
-    "A": lambda h, o_i, o_j: h[0] * o_i * o_j,
-    "AD": lambda h, o_i, o_j: h[0] * o_i * o_j + h[1],
-    "AD_lr": lambda h, o_i, o_j: h[2] * (h[0] * o_i * o_j + h[1]),
-    "ABC": lambda h, o_i, o_j: h[0] * o_i * o_j + h[1] * o_i + h[2] * o_j,
-    "ABC_lr": lambda h, o_i, o_j: h[3] * (h[0] * o_i * o_j + h[1] * o_i + h[2] * o_j),
-    "ABCD": lambda h, o_i, o_j: h[3] + h[0] * o_i * o_j + h[1] * o_i + h[2] * o_j,
-    "ABCD_lr": lambda h, o_i, o_j: h[3] * (h[0] * o_i * o_j + h[1] * o_i + h[2] * o_j + h[4]),
-    "ABCD_lr_D_out": lambda h, o_i, o_j: h[3] * (h[0] * o_i * o_j + h[1] * o_i + h[2] * o_j) + h[4],
-    "ABCD_lr_D_in_and_out": lambda h, o_i, o_j: h[3] * (h[0] * o_i * o_j + h[1] * o_i + h[2] * o_j + h[4]) + h[5],
-}
+from tests.rule_equations import EQUATIONS
 
 N_COEFFS = {"A": 1, "AD": 2, "AD_lr": 3, "ABC": 3, "ABC_lr": 4, "ABCD": 4, "ABCD_lr": 5,
             "ABCD_lr_D_out": 5, "ABCD_lr_D_in_and_out": 6}
