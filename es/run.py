@@ -164,7 +164,8 @@ class Run:
         self.strategy = OpenES(config.popsize, config.decay)
         self.noise_size = config.noise_size or default_size(self.dim)
         config.noise_size = self.noise_size
-        serial = config.workers == 1
+        # in this process for --threads 1, or a one-core machine's pool; Ray counts its cluster's CPUs
+        serial = config.threads == 1 or (config.backend == "process" and config.workers == 1)
         self.noise = NoiseTable.create(config.seed, self.noise_size, shared=not serial)
         try:
             env_ids = tuple(config.env_ids)
