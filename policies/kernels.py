@@ -87,8 +87,9 @@ def _largest_magnitude(values):
 
 
 @njit(**_FLAGS)
-def _plastic(weights_t, folded, pre, post, scale, squash):
-    """Forward one layer with its current weights, then update it in place; returns max |w|."""
+def _plastic(weights_t, folded, pre, post, scale, squash, normalise):
+    """Forward one layer with its current weights, then update it in place; returns the factor
+    that normalises the updated layer (1 / max |w|), or 1."""
     _dense(weights_t, pre, post, scale, squash)
     n_in, n_out = weights_t.shape
     for i in range(n_in):
@@ -100,7 +101,11 @@ def _plastic(weights_t, folded, pre, post, scale, squash):
         d = folded[3, i]
         for j in range(n_out):
             row[j] = row[j] * scale + (a[j] * post[j] + b[j]) * activity + (c[j] * post[j] + d[j])
-    return _largest_magnitude(weights_t.reshape(-1))
+    one = np.float32(1.0)
+    if not normalise:
+        return one
+    largest = _largest_magnitude(weights_t.reshape(-1))
+    return one / largest if largest > 0 else one
 
 
 @njit(**_FLAGS)
@@ -133,16 +138,12 @@ def hebbian_forward_update(weights, folded, scale, obs, work, n_in, n_h1, n_h2, 
     pending normalisation factor of each layer. Updating right after acting is the original
     order (act, step the environment, update): the action was computed with the old weights.
     """
-    one = np.float32(1.0)
     o2 = n_in * n_h1
     o3 = o2 + n_h1 * n_h2
     x, h1, h2, out = _activities(obs, work, n_in, n_h1, n_h2)
-    largest = _plastic(weights[:o2].reshape(n_in, n_h1), folded[:4 * o2].reshape(4, n_in, n_h1),
-                       x, h1, scale[0], True)
-    scale[0] = one / largest if normalise and largest > 0 else one
-    largest = _plastic(weights[o2:o3].reshape(n_h1, n_h2), folded[4 * o2:4 * o3].reshape(4, n_h1, n_h2),
-                       h1, h2, scale[1], True)
-    scale[1] = one / largest if normalise and largest > 0 else one
-    largest = _plastic(weights[o3:].reshape(n_h2, n_out), folded[4 * o3:].reshape(4, n_h2, n_out),
-                       h2, out, scale[2], squash_out)
-    scale[2] = one / largest if normalise and largest > 0 else one
+    scale[0] = _plastic(weights[:o2].reshape(n_in, n_h1), folded[:4 * o2].reshape(4, n_in, n_h1),
+                        x, h1, scale[0], True, normalise)
+    scale[1] = _plastic(weights[o2:o3].reshape(n_h1, n_h2), folded[4 * o2:4 * o3].reshape(4, n_h1, n_h2),
+                        h1, h2, scale[1], True, normalise)
+    scale[2] = _plastic(weights[o3:].reshape(n_h2, n_out), folded[4 * o3:].reshape(4, n_h2, n_out),
+                        h2, out, scale[2], squash_out, normalise)
