@@ -67,9 +67,12 @@ def _dense(weights_t, pre, post, scale, squash):
         row = weights_t[i]
         for j in range(n_out):
             post[j] += row[j] * activity
-    for j in range(n_out):
-        total = post[j] * scale
-        post[j] = _tanh(total) if squash else total
+    if squash:  # two loops rather than a branch inside one: each vectorises
+        for j in range(n_out):
+            post[j] = _tanh(post[j] * scale)
+    else:
+        for j in range(n_out):
+            post[j] *= scale
 
 
 @njit(**_FLAGS)
