@@ -8,6 +8,7 @@ be valid, exit code 2, and nothing created or overwritten.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import secrets
 import sys
@@ -63,6 +64,21 @@ def flag_value(text: str | None) -> bool:
     if lowered in ("0", "false", "no", "off", ""):
         return False
     raise argparse.ArgumentTypeError(f"expected true or false, got {text!r}")
+
+
+@contextlib.contextmanager
+def explained(what: str):
+    """Turn a setup failure into a UserError: a ValueError already says what is wrong (incompatible
+    environments, a wrong-sized file); anything else (a custom environment whose constructor
+    raises, a worker that cannot start) is named with ``what`` and its type."""
+    try:
+        yield
+    except USER_ERRORS:
+        raise
+    except ValueError as error:
+        raise UserError(str(error)) from None
+    except Exception as error:
+        raise UserError(f"{what}: {type(error).__name__}: {error}") from None
 
 
 # --- training -----------------------------------------------------------------------------------
@@ -165,14 +181,8 @@ def train_main(kind: str, parser: Parser, argv: list[str] | None = None) -> int:
             config, run_dir = config_from_args(kind, args), None
             check_writable(config.folder)
         spec = ProblemSpec(tuple(config.env_ids), kind, config.hebb_rule, config.init_weights)
-        try:
+        with explained("cannot start the run"):
             run = Run(config, spec, run_dir or Path("."), log=_log, display=display_for(sys.stdout))
-        except USER_ERRORS:
-            raise
-        except ValueError as error:  # incompatible environments, bad network, ...
-            raise UserError(str(error)) from None
-        except Exception as error:  # an environment that cannot be made, a worker that cannot start
-            raise UserError(f"cannot start the run: {type(error).__name__}: {error}") from None
         if run_dir is None:
             try:
                 run.run_dir = new_run_dir(config.folder, config.env_label, config.seed)
@@ -234,8 +244,8 @@ def check_output_file(path: str | None, flag: str) -> None:
     if path is None:
         return
     target = Path(path)
-    if target.is_dir():
-        raise UserError(f"{flag} {path}: is a folder; give a file name")
+    if target.exists() and not target.is_file():
+        raise UserError(f"{flag} {path}: exists and is not a regular file (a folder or a device); give a file name")
     parent = target.parent
     if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
         raise UserError(f"{flag} {path}: {parent} is not an existing writable folder")
@@ -275,15 +285,16 @@ def evaluate_main(kind: str, parser: Parser, argv: list[str] | None, load_arrays
         env_ids = resolve_environments(args.environment)
         for path, flag in ((args.json, "--json"), (args.plot, "--plot"), (args.video, "--video")):
             check_output_file(path, flag)
+        if args.render and args.video:
+            raise UserError("--video records frames off screen; it cannot be combined with --render")
         arrays = load_arrays(args)
         spec = ProblemSpec(tuple(env_ids), kind, getattr(args, "hebb_rule", "ABCD_lr"),
                            getattr(args, "init_weights", "uni"))
         render_mode = "human" if args.render else ("rgb_array" if args.video else None)
-        try:
+        with explained("cannot make the environments"):
             problem = spec.build(render_mode)
+        with explained("cannot load the weights"):
             params = problem.policy.load(arrays)
-        except ValueError as error:
-            raise UserError(str(error)) from None
         if args.video:
             record_first_episode(problem)
 
@@ -294,7 +305,10 @@ def evaluate_main(kind: str, parser: Parser, argv: list[str] | None, load_arrays
                   f"{report.returns[-1]:.2f} | steps {report.steps[-1]}{distance}", flush=True)
 
         reports = evaluate(problem, params, args.episodes, args.seed, on_episode=show)
-        write_evaluation_outputs(args, [parser.prog, *argv], kind, reports, problem, params)
+        try:
+            write_evaluation_outputs(args, [parser.prog, *argv], kind, reports, problem, params)
+        except (OSError, ValueError) as error:  # a full disk, an environment that renders no frames
+            raise UserError(f"{type(error).__name__}: {error}") from None
         return 0
     except USER_ERRORS as error:
         print(f"{parser.prog}: error: {error}", file=sys.stderr)

@@ -31,6 +31,7 @@ import gymnasium as gym
 import numpy as np
 
 from envs.problem import Problem
+from envs.recipes import is_pybullet_ant
 from envs.rollout import Episode, rollout
 from envs.wrappers import FrameRecorder
 
@@ -45,14 +46,6 @@ def _mujoco_ant_torso(env) -> np.ndarray:
     return np.array(env.data.qpos[:2], dtype=np.float64)
 
 
-def _is_pybullet_ant(env) -> bool:
-    if "pybullet" not in sys.modules:  # no pyBullet env can have been made (and its import prints)
-        return False
-    from pybullet_envs_gymnasium.gym_locomotion_envs import AntBulletEnv
-
-    return isinstance(env, AntBulletEnv)
-
-
 def _is_mujoco_ant(env) -> bool:
     if "mujoco" not in sys.modules:
         return False
@@ -62,7 +55,7 @@ def _is_mujoco_ant(env) -> bool:
 
 
 _TORSO: list[tuple[Callable[[gym.Env], bool], Callable[[gym.Env], np.ndarray]]] = [
-    (_is_pybullet_ant, _pybullet_ant_torso),
+    (is_pybullet_ant, _pybullet_ant_torso),  # the recipe's own test: damaged ants included
     (_is_mujoco_ant, _mujoco_ant_torso),
 ]
 

@@ -64,7 +64,7 @@ class Problem:
             raise ValueError(f"{env_id} needs network {net.obs_shape} -> {net.n_actions} (output tanh: "
                              f"{net.squash_out}) but {first} needs {self.net.obs_shape} -> "
                              f"{self.net.n_actions} (output tanh: {self.net.squash_out}); "
-                             "environments trained together must share observation and action sizes")
+                             "environments used together must share observation and action sizes")
         if recipe.normalise_hebbian != self.recipes[0].normalise_hebbian and self.spec.kind == "hebbian":
             self.close()
             raise ValueError(f"{env_id} and {first} disagree on Hebbian weight normalisation; "

@@ -92,7 +92,7 @@ def _is_pybullet(env: gym.Env) -> bool:
     return any(cls.__module__.startswith("pybullet_envs_gymnasium") for cls in type(env).__mro__)
 
 
-def _is_pybullet_ant(env: gym.Env) -> bool:
+def is_pybullet_ant(env: gym.Env) -> bool:
     if not _is_pybullet(env):
         return False
     from pybullet_envs_gymnasium.gym_locomotion_envs import AntBulletEnv
@@ -103,7 +103,7 @@ def _is_pybullet_ant(env: gym.Env) -> bool:
 _PYBULLET = dict(squash_output=True, stop_patience=30, stop_check_after=201, normalise_hebbian=False)
 
 CAR_RACING = Recipe("CarRacing", _is_car_racing, action=CarRacingAction, stop_patience=20)
-PYBULLET_ANT = Recipe("pyBullet ant", _is_pybullet_ant, burn_in=40, reward=ProgressReward, **_PYBULLET)
+PYBULLET_ANT = Recipe("pyBullet ant", is_pybullet_ant, burn_in=40, reward=ProgressReward, **_PYBULLET)
 PYBULLET = Recipe("pyBullet", _is_pybullet, **_PYBULLET)
 GYMNASIUM = Recipe("Gymnasium", lambda env: True)
 

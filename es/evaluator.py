@@ -29,7 +29,7 @@ from typing import Callable
 import numpy as np
 
 from es.noise import NoiseTable, attach_shared
-from es.worker import TaskFailure, Worker, pin_threads
+from es.worker import Worker, pin_threads
 
 MAX_ATTEMPTS = 2
 CHUNK_SECONDS = 0.1
@@ -43,6 +43,10 @@ def describe_failure(task: np.ndarray, env_ids: tuple[str, ...], how: str, messa
     member, noise_index, _, env_index, seed = (int(value) for value in task)
     who = "the unperturbed centre" if noise_index < 0 else f"member {member}"
     return f"{env_ids[env_index]} failed {how} for {who} (episode seed {seed}): {message}"
+
+
+class WorkerStartError(RuntimeError):
+    """A worker (process or actor) could not build its environments or start at all."""
 
 
 class EvaluationError(RuntimeError):
@@ -123,11 +127,7 @@ class SerialEvaluator:
         run = _Generation(tasks, self.env_ids, progress)
         while run.waiting:
             index = run.waiting.popleft()
-            outcome = self._worker.run(generation, sigma, tasks[index])
-            if isinstance(outcome, TaskFailure):
-                run.record(index, "error", outcome.message)
-            else:
-                run.record(index, "result", outcome)
+            run.record(index, *self._worker.run(generation, sigma, tasks[index]))
         return run.results
 
     def close(self) -> None:
@@ -168,11 +168,7 @@ def _worker_main(conn, build_problem, noise_name: str, noise_size: int, theta_na
             break
         generation, sigma, chunk = message
         for task in chunk:
-            outcome = worker.run(generation, sigma, task)
-            if isinstance(outcome, TaskFailure):
-                conn.send(("error", outcome.message))
-            else:
-                conn.send(("result", outcome))
+            conn.send(worker.run(generation, sigma, task))
         conn.send(("done", None))
     worker.close()
 
@@ -230,17 +226,14 @@ class ProcessEvaluator:
             slot.process.join(timeout=5)
             kind, payload = "fatal", f"worker process exited while starting ({_describe_exit(slot.process)})"
         if kind != "ready":
-            raise RuntimeError(f"a worker could not start: {payload}")
-
-    def _chunk_size(self, n_tasks: int) -> int:
-        return chunk_size(n_tasks, self.workers, self._task_seconds)
+            raise WorkerStartError(f"a worker could not start: {payload}")
 
     def evaluate(self, generation: int, theta: np.ndarray, sigma: float, tasks: np.ndarray,
                  progress: Progress | None = None) -> Results:
         self._theta[:] = theta
         started = time.perf_counter()
         run = _Generation(tasks, self.env_ids, progress)
-        size = self._chunk_size(len(tasks))
+        size = chunk_size(len(tasks), self.workers, self._task_seconds)
         idle = list(self._slots)
         busy: dict = {}  # connection or process sentinel -> slot
         while run.remaining or busy:  # busy: wait for every "done", so no message is left over

@@ -38,6 +38,8 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
     A crash at any moment leaves either the old file or the new one, never a torn one.
     """
     path = Path(path)
+    if path.exists() and not path.is_file():  # never rename over a folder, a device or a pipe
+        raise OSError(f"{path} exists and is not a regular file")
     descriptor, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         os.fchmod(descriptor, _FILE_MODE)
@@ -128,6 +130,11 @@ def static_file_name(env: str, reward: int, population: int, generation: int) ->
 def hebbian_file_name(env: str, reward: int, rule: str, init: str, population: int, role: str,
                       generation: int) -> str:
     return f"HEBcoeffs__{env}__rew_{reward}__{rule}__init_{init}__pop_{population}__{role}__{generation}.dat"
+
+
+def named_file(prefix: str, role: str) -> str:
+    """``best.dat`` / ``last.dat`` for static weights, ``<prefix>_<role>.dat`` for Hebbian parts."""
+    return f"{prefix}.dat" if role == "weights" else f"{prefix}_{role}.dat"
 
 
 def fitness_file_name(run_id: str, env: str) -> str:

@@ -36,9 +36,9 @@ import numpy as np
 import ray
 from ray.exceptions import RayActorError, RayError
 
-from es.evaluator import Progress, Results, _Generation, chunk_size
+from es.evaluator import Progress, Results, WorkerStartError, _Generation, chunk_size
 from es.noise import NoiseTable
-from es.worker import TaskFailure, Worker, pin_threads
+from es.worker import Worker, pin_threads
 
 WAIT_SECONDS = 0.5  # ray.wait wakes up this often, so a second Ctrl-C is handled promptly
 REACH_SECONDS = 5  # to open a TCP connection to --ray_address HOST:PORT
@@ -142,14 +142,7 @@ class _WorkerActor:
             rows: np.ndarray) -> list[tuple[int, str, object]]:
         """Run a chunk; (task index, "result", (return, steps)) or (task index, "error", message)."""
         self.worker.theta = theta  # Ray resolved the generation's reference: a read-only view
-        outcomes = []
-        for index, row in zip(indices, rows):
-            outcome = self.worker.run(generation, sigma, row)
-            if isinstance(outcome, TaskFailure):
-                outcomes.append((index, "error", outcome.message))
-            else:
-                outcomes.append((index, "result", outcome))
-        return outcomes
+        return [(index, *self.worker.run(generation, sigma, row)) for index, row in zip(indices, rows)]
 
 
 _RemoteWorker = ray.remote(num_cpus=1, max_restarts=0)(_WorkerActor)
@@ -190,7 +183,7 @@ class RayEvaluator:
             failure = f"its process died ({_death_reason(error)})"
         if failure is not None:
             ray.kill(actor, no_restart=True)
-            raise RuntimeError(f"a worker could not start: {failure}")
+            raise WorkerStartError(f"a worker could not start: {failure}")
         self._actors.append(actor)
         return actor
 

@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from es import files, plots
-from es.evaluator import EvaluationError, ProcessEvaluator, Results, SerialEvaluator
+from es.evaluator import EvaluationError, ProcessEvaluator, Results, SerialEvaluator, WorkerStartError
 from es.noise import NoiseTable, default_size
 from es.progress import Display, QuietDisplay
 from es.strategy import ESState, OpenES
@@ -196,7 +196,7 @@ class Run:
                         self.log(f"interrupted after generation {self.state.generation}; "
                                  f"resume with: {self.resume_hint()}")
                         return INTERRUPTED
-            except (EvaluationError, SaveError) as error:
+            except (EvaluationError, WorkerStartError, SaveError) as error:
                 return self._stop(error)
         return 0
 
@@ -204,10 +204,10 @@ class Run:
         generation = self.state.generation
         return generation % self.config.print_every == 0 or generation == self.config.generations
 
-    def _stop(self, error: EvaluationError | SaveError) -> int:
+    def _stop(self, error: EvaluationError | WorkerStartError | SaveError) -> int:
         """Report what stopped the run, checkpoint it if that still works, and say how to resume."""
         self.log(f"error: {error}")
-        if isinstance(error, EvaluationError):
+        if not isinstance(error, SaveError):  # a failed save would most likely fail again
             try:
                 self.save_checkpoint()
             except SaveError as save_error:
@@ -322,7 +322,7 @@ class Run:
     def _save_named(self, prefix: str, theta: np.ndarray) -> None:
         arrays = self.policy.export(theta)
         for role, array in arrays.items():
-            self._write(files.save_dat, f"{prefix}.dat" if role == "weights" else f"{prefix}_{role}.dat", array)
+            self._write(files.save_dat, files.named_file(prefix, role), array)
 
     def _write(self, write: Callable, name: str, *args) -> None:
         """``write(run_dir / name, *args)``; an OSError becomes a SaveError naming the file.
@@ -349,23 +349,26 @@ class Run:
         """Continue from the run folder's checkpoint; metrics rows after it are dropped."""
         path = self.run_dir / "checkpoint.npz"
         try:
-            with np.load(path) as saved:
-                theta = saved["theta"]
-                if theta.shape != (self.dim,):
-                    raise UserError(f"{path} holds {theta.size} parameters; this run needs {self.dim}")
-                self.state = ESState(theta.astype(np.float32), float(saved["lr"]), float(saved["sigma"]),
-                                     int(saved["generation"]))
-                best = saved["best_theta"]
-                self.history = History(best if best.size else None, float(saved["best_center"]),
-                                         [float(value) for value in saved["fitness_log"]], [],
-                                         int(saved["total_steps"]), float(saved["total_seconds"]))
-        except (OSError, KeyError, ValueError) as error:
-            if isinstance(error, UserError):
-                raise
-            raise UserError(f"cannot resume from {path}: {error}") from None
+            with np.load(path) as file:
+                saved = {name: file[name] for name in file.files}
+            theta, best = saved["theta"], saved["best_theta"]
+            state = ESState(theta.astype(np.float32), float(saved["lr"]), float(saved["sigma"]),
+                            int(saved["generation"]))
+            history = History(best if best.size else None, float(saved["best_center"]),
+                              [float(value) for value in saved["fitness_log"]], [],
+                              int(saved["total_steps"]), float(saved["total_seconds"]))
+        except Exception as error:  # truncated, corrupt, or not a checkpoint at all
+            raise UserError(f"cannot resume from {path}: not a readable checkpoint "
+                            f"({type(error).__name__}); its run cannot be continued") from None
+        if theta.shape != (self.dim,):
+            raise UserError(f"{path} holds {theta.size} parameters; this run needs {self.dim}")
+        self.state, self.history = state, history
         metrics_path = self.run_dir / "metrics.csv"
-        rows = files.read_metrics(metrics_path) if metrics_path.exists() else []
-        self.history.metrics = [row for row in rows if int(row["generation"]) <= self.state.generation]
+        try:
+            rows = files.read_metrics(metrics_path) if metrics_path.exists() else []
+            self.history.metrics = [row for row in rows if int(row["generation"]) <= self.state.generation]
+        except (KeyError, ValueError, TypeError) as error:
+            raise UserError(f"cannot resume: {metrics_path} is unreadable ({type(error).__name__}: {error})") from None
         self.checkpoint_generation = self.state.generation
         self._remove_stale_temporaries()
 
@@ -383,16 +386,14 @@ class Run:
 
         Not ``best``: that is the centre with the best single-episode return, a noisy choice.
         """
-        prefix = "last"
-        config, directory = self.config, self.run_dir
+        config = self.config
+        paths = {role: self.run_dir / files.named_file("last", role) for role in self.policy.export(self.state.theta)}
         if config.kind == "static":
             return (f"python evaluate_static.py --environment {config.environment} "
-                    f"--path_weights {directory / f'{prefix}.dat'} --episodes 10")
-        roles = [role for role in self.policy.export(self.state.theta) if role != "coeffs"]
-        coevolved = f" --path_coev {directory / f'{prefix}_{roles[0]}.dat'}" if roles else ""
+                    f"--path_weights {paths['weights']} --episodes 10")
+        coevolved = "".join(f" --path_coev {path}" for role, path in paths.items() if role != "coeffs")
         return (f"python evaluate_hebb.py --environment {config.environment} --hebb_rule {config.hebb_rule} "
-                f"--init_weights {config.init_weights} --path_hebb {directory / f'{prefix}_coeffs.dat'}"
-                f"{coevolved} --episodes 10")
+                f"--init_weights {config.init_weights} --path_hebb {paths['coeffs']}{coevolved} --episodes 10")
 
     def write_config(self, argv: list[str]) -> None:
         """config.json; a resume keeps the first command and lists its own under "resumed"."""

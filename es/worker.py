@@ -5,20 +5,20 @@ theta and sigma once; a task is then five integers
 
     (member, noise_index, sign, env_index, episode_seed)
 
-and its result (return, env steps). ``noise_index < 0`` is the unperturbed centre, theta itself.
+and its outcome ("result", (return, env steps)) or ("error", message). ``noise_index < 0`` is the unperturbed centre, theta itself.
 """
 
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
-from typing import Callable, Iterator
+from typing import Callable
 
 import numpy as np
 
 from es.noise import NoiseTable
 
 TASK_FIELDS = ("member", "noise_index", "sign", "env_index", "seed")
+Outcome = tuple[str, object]  # ("result", (return, steps)) or ("error", message)
 
 
 def make_tasks(members: np.ndarray, noise_indices: np.ndarray, signs: np.ndarray,
@@ -49,11 +49,6 @@ def perturb(theta: np.ndarray, epsilon: np.ndarray, sign: int, sigma: float) -> 
     return theta + np.float32(sign * sigma) * epsilon
 
 
-@dataclass
-class TaskFailure:
-    message: str
-
-
 class Worker:
     """Holds a built problem (its environments are made once) and evaluates tasks."""
 
@@ -75,23 +70,20 @@ class Worker:
             self._cached = key
         return self._params
 
-    def run(self, generation: int, sigma: float, task) -> tuple[float, int] | TaskFailure:
+    def run(self, generation: int, sigma: float, task) -> Outcome:
+        """("result", (return, steps)), or ("error", message) after remaking the environment."""
         member, noise_index, sign, env_index, seed = (int(value) for value in task)
         try:
             params = self.params(generation, sigma, member, noise_index, sign)
             episode = self.problem.evaluate(params, env_index, seed)
-            return episode.total_return, episode.steps
+            return "result", (episode.total_return, episode.steps)
         except Exception as error:  # reported to the runner, which retries once, then stops the run
             message = f"{type(error).__name__}: {error}"
             try:
                 self.problem.rebuild(env_index)
             except Exception as rebuild_error:
                 message += f" (and remaking the environment failed: {rebuild_error})"
-            return TaskFailure(message)
-
-    def run_many(self, generation: int, sigma: float, tasks) -> Iterator[tuple[float, int] | TaskFailure]:
-        for task in tasks:
-            yield self.run(generation, sigma, task)
+            return "error", message
 
     def close(self) -> None:
         self.problem.close()

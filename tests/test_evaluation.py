@@ -152,3 +152,18 @@ def test_unwritable_output_is_one_line_and_exit_2(tmp_path, capsys, flag):
     assert code == 2
     assert error.splitlines() == [f"evaluate_static.py: error: {flag} {missing}: {missing.parent} is not an "
                                   "existing writable folder"]
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--json", "{folder}"], "--json {folder}: exists and is not a regular file (a folder or a device); give a file name"),
+    (["--render", "--video", "{folder}/v.mp4"], "--video records frames off screen; it cannot be combined with --render"),
+])
+def test_impossible_outputs_are_one_line_and_exit_2(tmp_path, capsys, extra, message):
+    import evaluate_static
+
+    weights = saved_params(tmp_path, "CartPole-v1", "static")
+    extra = [item.format(folder=tmp_path) for item in extra]
+    code = evaluate_static.main(["--environment", "CartPole-v1", "--path_weights", str(weights), *extra])
+    assert code == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"evaluate_static.py: error: {message.format(folder=tmp_path)}"]

@@ -175,6 +175,14 @@ def test_failed_atomic_write_keeps_the_old_file(tmp_path):
 # --- the original names (spec §6) ----------------------------------------------------------------
 
 
+def test_atomic_write_never_replaces_a_folder(tmp_path):
+    target = tmp_path / "folder"
+    target.mkdir()
+    with pytest.raises(OSError, match="is not a regular file"):
+        atomic_write_bytes(target, b"x")
+    assert target.is_dir() and list(tmp_path.iterdir()) == [target]
+
+
 def test_original_file_names():
     assert static_file_name("AntBulletEnv-v0", 1523, 200, 299) == "AntBulletEnv-v0__rew_1523__pop_200__299.dat"
     assert static_file_name("Pendulum-v1", -12, 10, 0) == "Pendulum-v1__rew_-12__pop_10__0.dat"

@@ -152,3 +152,17 @@ def test_metrics_rows_after_the_checkpoint_are_dropped_on_resume(tmp_path, strai
     (run_dir / "checkpoint.npz").write_bytes(checkpoint_2)  # as if killed before checkpoint 3 was written
     assert train("--resume", str(run_dir), "--generations", "4") == 0
     assert_same_run(straight_run, run_dir)
+
+
+@pytest.mark.parametrize("damage", ["checkpoint", "metrics"])
+def test_a_corrupt_run_folder_is_one_line_and_exit_2(tmp_path, capsys, damage):
+    assert train(*CARTPOLE, "--threads", "1", "--generations", "1", "--folder", str(tmp_path)) == 0
+    run_dir = only_run(tmp_path)
+    if damage == "checkpoint":
+        (run_dir / "checkpoint.npz").write_bytes(b"not a checkpoint")
+    else:
+        (run_dir / "metrics.csv").write_text("generation,fitness_mean\nsecond,1.0\n")
+    capsys.readouterr()
+    assert train("--resume", str(run_dir), "--generations", "2") == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and error[0].startswith("train_static.py: error: cannot resume")
