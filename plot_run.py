@@ -12,9 +12,10 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from cli import Parser
-from es import files, plots
-from es.run import UserError
+from cli import Parser, UserError
+from es import files
+from report import plots
+
 
 DEFAULT_OUTPUT = "fitness_comparison.png"
 

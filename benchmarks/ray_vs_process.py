@@ -30,9 +30,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import envs  # noqa: E402  (headless defaults, pyBullet registration)
 from envs import ProblemSpec  # noqa: E402
-from es.evaluator import ProcessEvaluator  # noqa: E402
+from es.backends import Generation, ProcessEvaluator  # noqa: E402
+from es.backends.ray import RayEvaluator  # noqa: E402
 from es.noise import NoiseTable, default_size  # noqa: E402
-from es.ray_backend import RayEvaluator  # noqa: E402
 from es.worker import make_tasks  # noqa: E402
 
 TARGET = 1.10
@@ -54,7 +54,7 @@ def timed(make):
 
 def evaluate(evaluator, generation: int, theta: np.ndarray, sigma: float, tasks: np.ndarray):
     started = time.perf_counter()
-    results = evaluator.evaluate(generation, theta, sigma, tasks)
+    results = evaluator.evaluate(Generation(generation, theta, sigma, tasks))
     return results, time.perf_counter() - started
 
 
@@ -91,7 +91,7 @@ def main() -> int:
     env_id = envs.resolve_env_id(args.environment)
     spec = ProblemSpec((env_id,))
     problem = spec.build()
-    theta = problem.policy.initial_params(np.random.default_rng(args.seed), "normal")
+    theta = problem.policy.initial_params(np.random.default_rng(args.seed))
     problem.close()
     noise = NoiseTable.create(args.seed, default_size(theta.size), shared=True)
     evaluators = {}

@@ -32,9 +32,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import envs  # noqa: E402  (headless defaults, pyBullet registration)
 import gymnasium as gym  # noqa: E402
 from envs import ProblemSpec, quiet_output  # noqa: E402
-from es.evaluator import ProcessEvaluator, SerialEvaluator  # noqa: E402
+from es.backends import Generation, ProcessEvaluator, SerialEvaluator  # noqa: E402
 from es.noise import NoiseTable  # noqa: E402
 from es.worker import make_tasks  # noqa: E402
+from policies import PolicySettings  # noqa: E402
 
 
 def generation_tasks(population: int, dim: int, noise: NoiseTable, rng: np.random.Generator) -> np.ndarray:
@@ -48,7 +49,7 @@ def generation_tasks(population: int, dim: int, noise: NoiseTable, rng: np.rando
 def training_rate(evaluator, theta: np.ndarray, sigma: float, tasks: np.ndarray) -> float:
     """Env steps per second per worker over one generation of the real evaluation path (wall time)."""
     started = time.perf_counter()
-    results = evaluator.evaluate(0, theta, sigma, tasks)
+    results = evaluator.evaluate(Generation(0, theta, sigma, tasks))
     return results.steps.sum() / (time.perf_counter() - started) / evaluator.workers
 
 
@@ -63,9 +64,9 @@ def record_actions(evaluator: SerialEvaluator, theta: np.ndarray, sigma: float, 
 
     base.step = recording_step
     try:
-        for task in tasks:
-            episodes.append((int(task[4]), []))
-            evaluator.evaluate(0, theta, sigma, task[None])
+        for index, task in enumerate(tasks):
+            episodes.append((int(task["seed"]), []))
+            evaluator.evaluate(Generation(0, theta, sigma, tasks[index:index + 1]))
     finally:
         del base.step
     return episodes
@@ -88,7 +89,7 @@ def build(spec: ProblemSpec, workers: int, noise: NoiseTable, dim: int):
 
 def setup(args, spec: ProblemSpec, workers: int):
     problem = spec.build()
-    theta = problem.policy.initial_params(np.random.default_rng(0), "normal")
+    theta = problem.policy.initial_params(np.random.default_rng(0))
     problem.close()
     noise = NoiseTable.create(0, max(1 << 20, 4 * theta.size), shared=workers > 1)
     evaluator = build(spec, workers, noise, theta.size)
@@ -109,10 +110,10 @@ def measure_ratio(args, spec: ProblemSpec) -> list[float]:
         episodes = record_actions(evaluator, theta, args.sigma, tasks)
         for _ in range(args.rounds):
             raw_seconds = trained_seconds = 0.0
-            for task, (seed, actions) in zip(tasks, episodes):
+            for index, (seed, actions) in enumerate(episodes):
                 raw_seconds += replay(raw_env, seed, actions)
                 started = time.process_time()
-                evaluator.evaluate(0, theta, args.sigma, task[None])
+                evaluator.evaluate(Generation(0, theta, args.sigma, tasks[index:index + 1]))
                 trained_seconds += time.process_time() - started
             ratios.append(raw_seconds / trained_seconds)
     finally:
@@ -144,7 +145,7 @@ def main() -> int:
     parser.add_argument("--rounds", type=int, default=5)
     args = parser.parse_args()
     env_id = envs.resolve_env_id(args.environment)
-    spec = ProblemSpec((env_id,), args.policy, args.hebb_rule, args.init_weights)
+    spec = ProblemSpec((env_id,), PolicySettings(args.policy, args.hebb_rule, args.init_weights))
     label = f"{env_id}, {args.policy}" + (f" {args.hebb_rule}" if args.policy == "hebbian" else "")
     if args.scaling:
         one = statistics.median(measure_rate(args, spec, 1))

@@ -14,7 +14,8 @@ import gymnasium as gym  # noqa: E402
 
 from envs.make import EnvironmentError_, make_env, quiet_output, resolve_env_id  # noqa: E402
 from envs.problem import Problem, ProblemSpec  # noqa: E402
-from envs.recipes import Recipe, recipe_for, register_recipe  # noqa: E402
+from envs.settings import EnvSettings  # noqa: E402
+from envs.recipes import Recipe, custom_recipe_modules, recipe_for, register_recipe  # noqa: E402
 from envs.rollout import Episode, episode_rng, rollout  # noqa: E402
 
 gym.logger.min_level = 40  # errors only, as the original (gym.logger.set_level(40))
@@ -26,5 +27,6 @@ with quiet_output():
 
 import envs.damaged  # noqa: E402,F401  (registers the damaged ants of Najarro & Risi 2020)
 
-__all__ = ["EnvironmentError_", "Episode", "Problem", "ProblemSpec", "Recipe", "episode_rng",
-           "make_env", "quiet_output", "recipe_for", "register_recipe", "resolve_env_id", "rollout"]
+__all__ = ["EnvSettings", "EnvironmentError_", "Episode", "Problem", "ProblemSpec", "Recipe", "episode_rng",
+           "custom_recipe_modules", "make_env", "quiet_output", "recipe_for", "register_recipe", "resolve_env_id",
+           "rollout"]

@@ -15,16 +15,16 @@ progress reward uses ``body_xyz``, whose x and y average all body parts) and ``d
 (the free root joint) in MuJoCo. For pyBullet ants the return itself is the paper's "distance":
 the sum of the progress reward, about 60.6 per metre walked toward the target at +x.
 
-``trace_episode`` and ``plot_adaptation`` draw the paper's adaptation figure: per step, the reward
-(or, for ants, the distance from the start) and the Frobenius norm of each dense layer's weights,
-which for a Hebbian network start random and settle within the first ~100 steps.
+``trace_episode`` records the data of the paper's adaptation figure (``report.adaptation`` draws
+it): per step, the reward (or, for ants, the distance from the start) and the Frobenius norm of each
+dense layer's weights, which for a Hebbian network start random and settle within the first ~100
+steps.
 """
 
 from __future__ import annotations
 
 import sys
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Callable
 
 import gymnasium as gym
@@ -33,7 +33,6 @@ import numpy as np
 from envs.problem import Problem
 from envs.recipes import is_pybullet_ant
 from envs.rollout import Episode, rollout
-from envs.wrappers import FrameRecorder
 
 # --- the torso of ant environments --------------------------------------------------------------
 
@@ -206,58 +205,3 @@ def trace_episode(problem: Problem, params: np.ndarray, seed: int, env_index: in
     if trace.layer_norms:
         trace.layer_shapes = list(net.layer_shapes)
     return trace
-
-
-def plot_adaptation(trace: Trace, path: str | Path) -> None:
-    """A PNG of the trace; drawn with matplotlib's Agg canvas, so no display is ever needed."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    panels = 2 if trace.layer_norms else 1
-    figure = Figure(figsize=(8, 3.2 * panels), layout="constrained")
-    FigureCanvasAgg(figure)
-    axes = figure.subplots(panels, 1, sharex=True, squeeze=False)[:, 0]
-    steps = np.arange(1, len(trace.rewards) + 1)
-    if trace.distances:
-        axes[0].plot(steps, trace.distances, color="tab:blue", label="straight-line distance")
-        axes[0].plot(steps, trace.forward, color="tab:orange", label="forward (x) displacement")
-        axes[0].axhline(0.0, color="grey", linewidth=0.5)
-        axes[0].set_ylabel("torso from start (m)")
-        axes[0].legend(loc="best")
-    else:
-        axes[0].plot(steps, trace.rewards, color="tab:blue", linewidth=0.8)
-        axes[0].set_ylabel("reward per step")
-    axes[0].set_title(f"{trace.env_id}, seed {trace.seed}: return {trace.episode.total_return:.2f}")
-    if trace.layer_norms:
-        norms = np.array(trace.layer_norms)
-        for layer, (n_out, n_in) in enumerate(trace.layer_shapes):
-            axes[1].plot(steps, norms[:, layer], label=f"layer {layer + 1} ({n_in}→{n_out})")
-        axes[1].set_ylabel("weight norm (Frobenius)")
-        axes[1].set_yscale("log")
-        axes[1].legend(loc="best")
-    axes[-1].set_xlabel("policy step")
-    figure.savefig(str(path), dpi=100, format="png")
-
-
-# --- video --------------------------------------------------------------------------------------
-
-
-def record_first_episode(problem: Problem) -> FrameRecorder:
-    """Wrap the first environment so that its first episode's frames are kept."""
-    recorder = FrameRecorder(problem.envs[0], max_episodes=1)
-    problem.envs[0] = recorder
-    return recorder
-
-
-def write_video(path: str | Path, frames: list[np.ndarray], fps: int = 30) -> None:
-    """An mp4 (H.264) of RGB frames; odd sizes are padded to even ones, as the codec needs."""
-    import imageio.v2 as imageio
-
-    if not frames:
-        raise ValueError("no frames were rendered; the environment may not support rgb_array rendering")
-    height, width = frames[0].shape[:2]
-    pad = ((0, height % 2), (0, width % 2), (0, 0))
-    with imageio.get_writer(str(path), fps=fps, macro_block_size=1, codec="libx264",
-                            pixelformat="yuv420p") as writer:
-        for frame in frames:
-            writer.append_data(np.pad(frame[..., :3], pad))

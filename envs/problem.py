@@ -12,17 +12,16 @@ import gymnasium as gym
 from gymnasium import spaces
 
 from envs.make import make_env
-from envs.recipes import Recipe
+from envs.recipes import Recipe, import_recipe_modules
 from envs.rollout import Episode, rollout
-from policies import HebbianPolicy, NetworkSpec, StaticPolicy
+from policies import NetworkSpec, PolicySettings, kind_of, make_policy
 
 
 @dataclass(frozen=True)
 class ProblemSpec:
     env_ids: tuple[str, ...]  # resolved ids; fitness is the mean over all of them
-    kind: str = "static"  # "static" or "hebbian"
-    hebb_rule: str = "ABCD_lr"
-    init_weights: str = "uni"
+    policy: PolicySettings = PolicySettings()
+    recipe_modules: tuple[str, ...] = ()  # imported before the environments are made (custom recipes)
 
     def build(self, render_mode: str | None = None) -> "Problem":
         return Problem(self, render_mode)
@@ -35,12 +34,13 @@ def network_spec(env: gym.Env, recipe: Recipe) -> NetworkSpec:
     return NetworkSpec(tuple(env.observation_space.shape), n_actions, recipe.squash_output)
 
 
-def make_policy(spec: ProblemSpec, net: NetworkSpec, recipe: Recipe):
-    if spec.kind == "static":
-        return StaticPolicy(net)
-    if spec.kind == "hebbian":
-        return HebbianPolicy(net, spec.hebb_rule, spec.init_weights, normalise=recipe.normalise_hebbian)
-    raise ValueError(f"unknown policy kind {spec.kind!r}; valid kinds: static, hebbian")
+def wrapper_stack(env: gym.Env) -> list[str]:
+    """The classes an observation passes through, outermost first, down to the environment itself."""
+    stack = [type(env).__name__]
+    while isinstance(env, gym.Wrapper):
+        env = env.env
+        stack.append(type(env).__name__)
+    return stack
 
 
 class Problem:
@@ -48,6 +48,7 @@ class Problem:
         self.spec = spec
         self.envs: list[gym.Env] = []
         self.recipes: list[Recipe] = []
+        import_recipe_modules(spec.recipe_modules)
         for env_id in spec.env_ids:
             env, recipe = make_env(env_id, render_mode)
             self.envs.append(env)
@@ -55,7 +56,7 @@ class Problem:
         self.net = network_spec(self.envs[0], self.recipes[0])
         for env_id, env, recipe in zip(spec.env_ids, self.envs, self.recipes):
             self._check_compatible(env_id, network_spec(env, recipe), recipe)
-        self.policy = make_policy(spec, self.net, self.recipes[0])
+        self.policy = make_policy(spec.policy, self.net, self.recipes[0].normalise_hebbian)
 
     def _check_compatible(self, env_id: str, net: NetworkSpec, recipe: Recipe) -> None:
         first = self.spec.env_ids[0]
@@ -65,10 +66,14 @@ class Problem:
                              f"{net.squash_out}) but {first} needs {self.net.obs_shape} -> "
                              f"{self.net.n_actions} (output tanh: {self.net.squash_out}); "
                              "environments used together must share observation and action sizes")
-        if recipe.normalise_hebbian != self.recipes[0].normalise_hebbian and self.spec.kind == "hebbian":
+        if recipe.normalise_hebbian != self.recipes[0].normalise_hebbian and kind_of(self.spec.policy).plastic:
             self.close()
             raise ValueError(f"{env_id} and {first} disagree on Hebbian weight normalisation; "
                              "train them separately")
+
+    def wrappers(self) -> dict[str, list[str]]:
+        """Each environment's wrapper stack (recorded in config.json)."""
+        return {env_id: wrapper_stack(env) for env_id, env in zip(self.spec.env_ids, self.envs)}
 
     def evaluate(self, params, env_index: int, seed: int) -> Episode:
         return rollout(self.envs[env_index], self.policy, params, seed)

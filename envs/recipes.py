@@ -13,11 +13,16 @@ a network option:
     anything else raw      clip (Box) / argmax       the environment's own            -
 
 Hebbian weights are normalised after every update for every family except pyBullet.
-Custom families can be added with ``register_recipe``.
+
+Custom families are added with ``register_recipe`` from an importable module. The module is
+recorded (``custom_recipe_modules``, saved in config.json), and every process that builds the
+environments (worker processes, Ray actors, a resumed run) imports it first, so the recipe reaches
+all of them.
 """
 
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass
 from typing import Callable
 
@@ -108,11 +113,37 @@ PYBULLET = Recipe("pyBullet", _is_pybullet, **_PYBULLET)
 GYMNASIUM = Recipe("Gymnasium", lambda env: True)
 
 _RECIPES: list[Recipe] = [CAR_RACING, PYBULLET_ANT, PYBULLET, GYMNASIUM]
+_CUSTOM_MODULES: list[str] = []  # the modules that registered recipes, in order
 
 
 def register_recipe(recipe: Recipe) -> None:
-    """Give a family of (custom) environments its own behaviour; newest registrations win."""
+    """Give a family of (custom) environments its own behaviour; newest registrations win.
+
+    Call it at the top level of an importable module (the one that defines ``recipe.matches``):
+    that module is what worker processes import to get the recipe too.
+    """
+    module = recipe.matches.__module__
+    if module == "__main__":
+        raise ValueError(f"recipe {recipe.name!r} is defined in the script being run; define it in an importable "
+                         "module so that worker processes can import it too")
     _RECIPES.insert(0, recipe)
+    if module not in _CUSTOM_MODULES:
+        _CUSTOM_MODULES.append(module)
+
+
+def custom_recipe_modules() -> tuple[str, ...]:
+    """The modules whose import registers this process's custom recipes."""
+    return tuple(_CUSTOM_MODULES)
+
+
+def import_recipe_modules(modules: tuple[str, ...]) -> None:
+    """Import modules recorded by ``custom_recipe_modules`` (in a worker, or a resumed run)."""
+    for module in modules:
+        try:
+            importlib.import_module(module)
+        except ImportError as error:
+            raise ValueError(f"cannot import {module!r}, which registers an environment recipe of this run: "
+                             f"{error}") from None
 
 
 def recipe_for(env: gym.Env) -> Recipe:

@@ -69,9 +69,9 @@ def save_dat(path: Path, array: np.ndarray) -> None:
 
 
 def _numpy_safe_globals() -> list:
-    from numpy._core import multiarray
-
-    reconstruct = multiarray._reconstruct
+    # The function numpy's pickles of arrays call, taken from the public pickle protocol rather than
+    # from numpy's private module (numpy 2 names it numpy._core.multiarray._reconstruct).
+    reconstruct = np.ndarray(0).__reduce__()[0]
     return [np.ndarray, np.dtype, reconstruct, (reconstruct, "numpy.core.multiarray._reconstruct"),
             *(type(np.dtype(code)) for code in "fdeihlqbBHIL?")]
 
@@ -118,27 +118,6 @@ def load_dat(path: str | Path) -> np.ndarray:
     if not isinstance(loaded, np.ndarray) or not np.issubdtype(loaded.dtype, np.number):
         raise FileFormatError(f"{str(path)!r} holds a {type(loaded).__name__}, not a numeric array")
     return loaded.astype(np.float32)
-
-
-# --- the original names -------------------------------------------------------------------------
-
-
-def static_file_name(env: str, reward: int, population: int, generation: int) -> str:
-    return f"{env}__rew_{reward}__pop_{population}__{generation}.dat"
-
-
-def hebbian_file_name(env: str, reward: int, rule: str, init: str, population: int, role: str,
-                      generation: int) -> str:
-    return f"HEBcoeffs__{env}__rew_{reward}__{rule}__init_{init}__pop_{population}__{role}__{generation}.dat"
-
-
-def named_file(prefix: str, role: str) -> str:
-    """``best.dat`` / ``last.dat`` for static weights, ``<prefix>_<role>.dat`` for Hebbian parts."""
-    return f"{prefix}.dat" if role == "weights" else f"{prefix}_{role}.dat"
-
-
-def fitness_file_name(run_id: str, env: str) -> str:
-    return f"Fitness_values_{run_id}_{env}.npy"
 
 
 def save_npy(path: Path, array: np.ndarray) -> None:

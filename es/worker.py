@@ -1,11 +1,14 @@
 """What a worker does with a task: rebuild the member's parameters from the noise table, run the episode.
 
 The wire protocol (DESIGN.md) is the same for every backend. Per generation the runner publishes
-theta and sigma once; a task is then five integers
+theta and sigma once; a task is then one record of ``TASK_DTYPE``
 
-    (member, noise_index, sign, env_index, episode_seed)
+    (member, noise_index, sign, env_index, seed)
 
-and its outcome ("result", (return, env steps)) or ("error", message). ``noise_index < 0`` is the unperturbed centre, theta itself.
+and its outcome ``("result", (return, env steps, L2 penalty))`` or ``("error", message)``.
+``noise_index < 0`` is the unperturbed centre, theta itself. The L2 penalty of the original's fitness,
+mean(theta_m^2) over the policy's penalised part, is computed here, where the member's parameters
+already exist, so that the runner never rebuilds a perturbed vector.
 """
 
 from __future__ import annotations
@@ -16,14 +19,16 @@ from typing import Callable
 import numpy as np
 
 from es.noise import NoiseTable
+from es.shaping import l2_penalty
 
-TASK_FIELDS = ("member", "noise_index", "sign", "env_index", "seed")
-Outcome = tuple[str, object]  # ("result", (return, steps)) or ("error", message)
+TASK_DTYPE = np.dtype([("member", np.int64), ("noise_index", np.int64), ("sign", np.int64),
+                       ("env_index", np.int64), ("seed", np.int64)])
+Outcome = tuple[str, object]  # ("result", (return, steps, penalty)) or ("error", message)
 
 
 def make_tasks(members: np.ndarray, noise_indices: np.ndarray, signs: np.ndarray,
                seeds: np.ndarray, n_envs: int) -> np.ndarray:
-    """All episodes of a generation, (n_tasks, 5) int64: every member on every env and seed.
+    """All episodes of a generation: every member on every env and seed, member-major.
 
     ``seeds[m]`` are member m's episode seeds; mirrored members get the same seeds.
     """
@@ -31,7 +36,7 @@ def make_tasks(members: np.ndarray, noise_indices: np.ndarray, signs: np.ndarray
             for member, index, sign, member_seeds in zip(members, noise_indices, signs, seeds)
             for env_index in range(n_envs)
             for seed in member_seeds]
-    return np.array(rows, dtype=np.int64).reshape(-1, len(TASK_FIELDS))
+    return np.array(rows, dtype=TASK_DTYPE)
 
 
 def pin_threads() -> None:
@@ -50,7 +55,12 @@ def perturb(theta: np.ndarray, epsilon: np.ndarray, sign: int, sigma: float) -> 
 
 
 class Worker:
-    """Holds a built problem (its environments are made once) and evaluates tasks."""
+    """Holds a built problem (its environments are made once) and evaluates tasks.
+
+    The problem has ``evaluate(params, env_index, seed) -> episode`` (with ``total_return`` and
+    ``steps``), ``rebuild(env_index)``, ``close()``, and ``policy.penalised``, the slice of the
+    parameters that the L2 term covers.
+    """
 
     def __init__(self, build_problem: Callable[[], object], noise: NoiseTable, theta: np.ndarray):
         self.problem = build_problem()
@@ -58,6 +68,7 @@ class Worker:
         self.theta = theta  # read-only here; the runner writes it between generations
         self._cached: tuple | None = None
         self._params: np.ndarray | None = None
+        self._penalty = 0.0
 
     def params(self, generation: int, sigma: float, member: int, noise_index: int, sign: int) -> np.ndarray:
         key = (generation, member)
@@ -67,16 +78,17 @@ class Worker:
             else:
                 epsilon = self.noise.slice(noise_index, self.theta.size)
                 self._params = perturb(self.theta, epsilon, sign, sigma)
+            self._penalty = l2_penalty(self._params[self.problem.policy.penalised])
             self._cached = key
         return self._params
 
-    def run(self, generation: int, sigma: float, task) -> Outcome:
-        """("result", (return, steps)), or ("error", message) after remaking the environment."""
-        member, noise_index, sign, env_index, seed = (int(value) for value in task)
+    def run(self, generation: int, sigma: float, task: np.void) -> Outcome:
+        """("result", (return, steps, penalty)), or ("error", message) after remaking the environment."""
+        env_index = int(task["env_index"])
         try:
-            params = self.params(generation, sigma, member, noise_index, sign)
-            episode = self.problem.evaluate(params, env_index, seed)
-            return "result", (episode.total_return, episode.steps)
+            params = self.params(generation, sigma, int(task["member"]), int(task["noise_index"]), int(task["sign"]))
+            episode = self.problem.evaluate(params, env_index, int(task["seed"]))
+            return "result", (episode.total_return, episode.steps, self._penalty)
         except Exception as error:  # reported to the runner, which retries once, then stops the run
             message = f"{type(error).__name__}: {error}"
             try:

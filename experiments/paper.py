@@ -1,6 +1,5 @@
 #!/usr/bin/env python
-"""The experiments of Najarro & Risi (2020), "Meta-Learning through Hebbian Plasticity in Random
-Networks", as commands: train with the paper's settings, then evaluate over 100 episodes.
+"""The experiments of Najarro & Risi (2020): train with the paper's settings, evaluate over 100 episodes.
 
     python experiments/paper.py carracing static      # CarRacing, evolved static weights
     python experiments/paper.py carracing hebbian     # CarRacing, evolved ABCD_lr rules, uni init
@@ -8,16 +7,14 @@ Networks", as commands: train with the paper's settings, then evaluate over 100 
     python experiments/paper.py ant hebbian
     python experiments/paper.py ant hebbian --popsize 8 --generations 2 --episodes 3   # a quick try
 
-Settings (HML README and defaults, upstream spec §10): popsize 200, 300 generations, lr 0.2,
-decay 0.995, sigma 0.1; Hebbian: ABCD_lr, --init_weights uni, --distribution normal. The paper's
-population and generation counts for the ant could not be verified; these are the code's defaults.
-The ant protocol (spec §5.4): fitness = mean over the standard ant and the ant with a damaged right
-front leg; the left-damaged ant is held out and only seen in evaluation.
+Each experiment is a data file, experiments/paper/<experiment>_<kind>.toml, that the training
+scripts read with --config (the same loader as a run's config.json); its [evaluation] section says
+where and how long to evaluate. Flags given here override the file.
 
 Runs take hours to days on 2 cores (experiments/README.md). Each experiment has its own folder
-(default ``runs/<experiment>_<kind>_seed<seed>``); running the same command again resumes the
-newest run there from its checkpoint (``--resume RUN_DIR``, ``--generations`` being the total), and
-once training is complete it only evaluates. ``--dry-run`` prints the commands instead.
+(default runs/<experiment>_<kind>_seed<seed>); running the same command again resumes the newest
+run there from its checkpoint (--resume RUN_DIR, --generations being the total), and once training
+is complete it only evaluates. --dry-run prints the commands instead.
 """
 
 from __future__ import annotations
@@ -26,36 +23,27 @@ import argparse
 import shlex
 import subprocess
 import sys
-from dataclasses import dataclass
+import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-
-
-@dataclass(frozen=True)
-class Experiment:
-    train_on: str
-    evaluate_on: str
-
-
-EXPERIMENTS = {
-    "carracing": Experiment("CarRacing-v0", "CarRacing-v0"),
-    "ant": Experiment("AntBulletEnv-v0,AntAsymRightBulletEnv-v0",
-                      "AntBulletEnv-v0,AntAsymRightBulletEnv-v0,AntAsymLeftBulletEnv-v0"),
-}
-HEBBIAN = ["--hebb_rule", "ABCD_lr", "--init_weights", "uni"]
+FILES = ROOT / "experiments" / "paper"
+EXPERIMENTS = sorted({path.stem.split("_")[0] for path in FILES.glob("*.toml")})
+TRAIN_SCRIPTS = {"static": "train_static.py", "hebbian": "train_hebb.py"}
+EVALUATE_SCRIPTS = {"static": "evaluate_static.py", "hebbian": "evaluate_hebb.py"}
 
 
 def parse(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    parser.add_argument("experiment", choices=list(EXPERIMENTS))
-    parser.add_argument("kind", choices=("static", "hebbian"))
-    parser.add_argument("--seed", type=int, default=1, help="seed of the training run")
-    parser.add_argument("--popsize", type=int, default=200)
-    parser.add_argument("--generations", type=int, default=300, help="total generations")
-    parser.add_argument("--episodes", type=int, default=100, help="evaluation episodes per body")
-    parser.add_argument("--threads", type=int, default=-1, help="workers; -1 = all cores")
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser.add_argument("experiment", choices=EXPERIMENTS)
+    parser.add_argument("kind", choices=tuple(TRAIN_SCRIPTS))
+    parser.add_argument("--seed", type=int, default=None, help="seed of the training run (default: the file's)")
+    parser.add_argument("--popsize", type=int, default=None, help="default: the file's")
+    parser.add_argument("--generations", type=int, default=None, help="total generations (default: the file's)")
+    parser.add_argument("--episodes", type=int, default=None, help="evaluation episodes per body (default: the file's)")
+    parser.add_argument("--threads", type=int, default=None, help="workers; -1 = all cores (default: the file's)")
     parser.add_argument("--folder", default=None, help="default: runs/<experiment>_<kind>_seed<seed>")
     parser.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
     return parser.parse_args(argv)
@@ -66,29 +54,33 @@ def latest_run(folder: Path) -> Path | None:
     return runs[-1] if runs else None
 
 
-def train_command(args: argparse.Namespace, experiment: Experiment, folder: Path) -> list[str]:
-    script = "train_hebb.py" if args.kind == "hebbian" else "train_static.py"
-    command = [sys.executable, str(ROOT / script)]
+def overrides(args: argparse.Namespace, *names: str) -> list[str]:
+    return [word for name in names if getattr(args, name) is not None for word in (f"--{name}", str(getattr(args, name)))]
+
+
+def train_command(args: argparse.Namespace, file: Path, folder: Path) -> list[str]:
+    command = [sys.executable, str(ROOT / TRAIN_SCRIPTS[args.kind])]
     previous = latest_run(folder)
     if previous is not None:
-        return command + ["--resume", str(previous), "--generations", str(args.generations),
-                          "--threads", str(args.threads)]
-    command += ["--environment", experiment.train_on, "--popsize", str(args.popsize),
-                "--generations", str(args.generations), "--lr", "0.2", "--decay", "0.995", "--sigma", "0.1",
-                "--threads", str(args.threads), "--seed", str(args.seed), "--folder", str(folder)]
-    return command + (HEBBIAN + ["--distribution", "normal"] if args.kind == "hebbian" else [])
+        return command + ["--resume", str(previous), *overrides(args, "generations", "threads")]
+    return command + ["--config", str(file), "--folder", str(folder),
+                      *overrides(args, "seed", "popsize", "generations", "threads")]
 
 
-def evaluate_command(args: argparse.Namespace, experiment: Experiment, run_dir: Path) -> list[str]:
+def evaluate_command(args: argparse.Namespace, experiment: dict, run_dir: Path) -> list[str]:
     """The final weights (last*.dat) on every body; statistics to JSON, one episode to a PNG."""
-    common = ["--environment", experiment.evaluate_on, "--episodes", str(args.episodes), "--seed", "0",
-              "--json", str(run_dir / "evaluation.json"), "--plot", str(run_dir / "adaptation.png")]
+    evaluation, policy = experiment["evaluation"], experiment["policy"]
+    command = [sys.executable, str(ROOT / EVALUATE_SCRIPTS[args.kind]), "--environment", evaluation["environment"],
+               "--episodes", str(args.episodes or evaluation["episodes"]), "--seed", "0",
+               "--json", str(run_dir / "evaluation.json"), "--plot", str(run_dir / "adaptation.png")]
     if args.kind == "static":
-        return [sys.executable, str(ROOT / "evaluate_static.py"), "--path_weights", str(run_dir / "last.dat"),
-                *common]
-    coev = ["--path_coev", str(run_dir / "last_CNN_parameters.dat")] if args.experiment == "carracing" else []
-    return [sys.executable, str(ROOT / "evaluate_hebb.py"), *HEBBIAN,
-            "--path_hebb", str(run_dir / "last_coeffs.dat"), *coev, *common]
+        return command + ["--path_weights", str(run_dir / "last.dat")]
+    command += ["--hebb_rule", policy["hebb_rule"], "--init_weights", policy["init_weights"],
+                "--path_hebb", str(run_dir / "last_coeffs.dat")]
+    # pixel networks also save their CNN, co-evolved runs their initial weights: whichever the run wrote
+    second = [path for path in (run_dir / "last_CNN_parameters.dat", run_dir / "last_coevolved_initial_weights.dat")
+              if path.exists()]
+    return command + [word for path in second for word in ("--path_coev", str(path))]
 
 
 def run(command: list[str], dry_run: bool) -> int:
@@ -98,12 +90,18 @@ def run(command: list[str], dry_run: bool) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
-    experiment = EXPERIMENTS[args.experiment]
-    folder = Path(args.folder or ROOT / "runs" / f"{args.experiment}_{args.kind}_seed{args.seed}")
-    code = run(train_command(args, experiment, folder), args.dry_run)
+    file = FILES / f"{args.experiment}_{args.kind}.toml"
+    with open(file, "rb") as handle:
+        experiment = tomllib.load(handle)
+    seed = args.seed if args.seed is not None else experiment["run"]["seed"]
+    folder = Path(args.folder or ROOT / "runs" / f"{args.experiment}_{args.kind}_seed{seed}")
+    code = run(train_command(args, file, folder), args.dry_run)
     if code != 0:
         return code
-    run_dir = latest_run(folder) or folder / "<run folder>"
+    run_dir = latest_run(folder)
+    if run_dir is None:  # a dry run before any training
+        print("# then, once the run exists, the evaluation of its last*.dat files", flush=True)
+        run_dir = folder / "<run folder>"
     return run(evaluate_command(args, experiment, run_dir), args.dry_run)
 
 

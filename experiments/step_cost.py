@@ -30,6 +30,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from envs import ProblemSpec, resolve_env_id  # noqa: E402
+from policies import PolicySettings
 
 
 def step_and_reset_cost(problem, env_index: int, steps: int) -> tuple[float, float]:
@@ -68,7 +69,7 @@ def main() -> int:
                         help="environment steps per episode (burn-in included) to project for")
     args = parser.parse_args()
     env_ids = tuple(resolve_env_id(env_id) for env_id in args.environment.split(","))
-    problem = ProblemSpec(env_ids, args.kind).build()
+    problem = ProblemSpec(env_ids, PolicySettings(args.kind)).build()
     try:
         costs = [step_and_reset_cost(problem, index, args.steps) for index in range(len(env_ids))]
         policy_steps = [args.length - recipe.burn_in for recipe in problem.recipes]

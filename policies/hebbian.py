@@ -29,6 +29,7 @@ from policies.rules import get_rule
 from policies.static import check_length, head_buffers
 
 DISTRIBUTIONS = ("normal", "uniform")
+ROLES = {"initial_weights": "coevolved_initial_weights", "cnn": "CNN_parameters"}  # layout part -> file role
 
 
 @dataclass
@@ -47,14 +48,17 @@ class HebbianState:
 
 
 class HebbianPolicy:
-    kind = "hebbian"
+    penalised_name = "coeffs"
 
     def __init__(self, net: NetworkSpec, rule: str = "ABCD_lr", init_weights: str = "uni",
-                 normalise: bool = True):
+                 normalise: bool = True, distribution: str = "normal"):
         if init_weights not in INIT_CHOICES:
             raise ValueError(f"unknown --init_weights {init_weights!r}; valid values: "
                              f"{', '.join(INIT_CHOICES)}")
+        if distribution not in DISTRIBUTIONS:
+            raise ValueError(f"unknown --distribution {distribution!r}; valid values: {', '.join(DISTRIBUTIONS)}")
         self.net = net
+        self.distribution = distribution
         self.rule = get_rule(rule)
         self.init_weights = init_weights
         self.normalise = normalise
@@ -67,14 +71,13 @@ class HebbianPolicy:
         self.layout = Layout(parts)
         self.num_params = self.layout.size
         self.penalised = self.layout["coefficients"].slice  # the original's L2 term: coefficients only
+        self.roles = ("coeffs",) + tuple(ROLES[name] for name, _ in parts[1:])
 
-    def initial_params(self, rng: np.random.Generator, distribution: str = "normal") -> np.ndarray:
+    def initial_params(self, rng: np.random.Generator) -> np.ndarray:
         """Generation-0 vector: N(0, 1) or U(-1, 1) for every part, as the original (spec §4.5)."""
-        if distribution == "normal":
+        if self.distribution == "normal":
             return rng.standard_normal(self.num_params, dtype=np.float32)
-        if distribution == "uniform":
-            return rng.uniform(-1.0, 1.0, self.num_params).astype(np.float32)
-        raise ValueError(f"unknown --distribution {distribution!r}; valid values: {', '.join(DISTRIBUTIONS)}")
+        return rng.uniform(-1.0, 1.0, self.num_params).astype(np.float32)
 
     def fold(self, params: np.ndarray) -> np.ndarray:
         """Per layer, the rule's planes (a, b, c, d) over (n_in, n_out), flat: what the kernel reads.
@@ -119,10 +122,9 @@ class HebbianPolicy:
         """The arrays the original wrote: coefficients (n_syn, k), or (n_syn,) for rule A."""
         coeffs = self.layout.view(params, "coefficients").copy()
         arrays = {"coeffs": coeffs[:, 0] if self.rule.n_coeffs == 1 else coeffs}
-        if "initial_weights" in self.layout:
-            arrays["coevolved_initial_weights"] = self.layout.view(params, "initial_weights").copy()
-        elif "cnn" in self.layout:
-            arrays["CNN_parameters"] = self.layout.view(params, "cnn").copy()
+        for name, role in ROLES.items():
+            if name in self.layout:
+                arrays[role] = self.layout.view(params, name).copy()
         return arrays
 
     def load(self, arrays: dict[str, np.ndarray]) -> np.ndarray:
@@ -134,7 +136,7 @@ class HebbianPolicy:
                              f"{self.rule.name} on this network needs shape ({n_syn}, {k})"
                              + (f" or ({n_syn},)" if k == 1 else ""))
         blocks = [coeffs.reshape(-1).astype(np.float32)]
-        for name, role in (("initial_weights", "coevolved_initial_weights"), ("cnn", "CNN_parameters")):
+        for name, role in ROLES.items():
             if name in self.layout:
                 if arrays.get(role) is None:
                     raise ValueError(f"this network also needs {role.replace('_', ' ')} "
@@ -142,3 +144,8 @@ class HebbianPolicy:
                 blocks.append(check_length("the --path_coev file", arrays[role], self.layout[name].size,
                                            f"{role.replace('_', ' ')} of this network"))
         return np.concatenate(blocks)
+
+    def file_name(self, role: str, env: str, reward: int, population: int, generation: int) -> str:
+        """The original Hebbian code's name (upstream spec §6)."""
+        return (f"HEBcoeffs__{env}__rew_{reward}__{self.rule.name}__init_{self.init_weights}__pop_{population}"
+                f"__{role}__{generation}.dat")

@@ -40,7 +40,8 @@ def check_length(name: str, array: np.ndarray, expected: int, what: str) -> np.n
 
 
 class StaticPolicy:
-    kind = "static"
+    penalised_name = "w"
+    roles = ("weights",)
 
     def __init__(self, net: NetworkSpec):
         self.net = net
@@ -52,7 +53,7 @@ class StaticPolicy:
         self._head = slice(CONV_SIZE if net.pixels else 0, self.num_params)
         self._sizes = net.head_sizes
 
-    def initial_params(self, rng: np.random.Generator, distribution: str | None = None) -> np.ndarray:
+    def initial_params(self, rng: np.random.Generator) -> np.ndarray:
         """PyTorch's default initialisation, U(+-1/sqrt(fan_in)) per layer, as the original."""
         blocks = []
         for part in self.layout.parts.values():
@@ -76,3 +77,7 @@ class StaticPolicy:
 
     def load(self, arrays: dict[str, np.ndarray]) -> np.ndarray:
         return check_length("the weight file", arrays["weights"], self.num_params, "this network")
+
+    def file_name(self, role: str, env: str, reward: int, population: int, generation: int) -> str:
+        """The original ES code's name (upstream spec §6)."""
+        return f"{env}__rew_{reward}__pop_{population}__{generation}.dat"

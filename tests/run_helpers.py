@@ -12,7 +12,11 @@ from pathlib import Path
 
 import numpy as np
 
+from envs import ProblemSpec
 from es.files import load_dat, read_metrics
+from es.loop import Trainer
+from es.runfolder import RunFolder
+from es.settings import ESSettings, RunSettings
 
 ROOT = Path(__file__).resolve().parent.parent
 WALL_CLOCK_COLUMNS = ("seconds", "total_seconds")
@@ -125,3 +129,11 @@ def assert_same_run(first: Path, second: Path) -> None:
     assert comparable_metrics(first) == comparable_metrics(second)
     (fitness_one,), (fitness_other,) = first.glob("Fitness_values_*.npy"), second.glob("Fitness_values_*.npy")
     assert np.load(fitness_one).tobytes() == np.load(fitness_other).tobytes()
+
+
+def small_trainer(folder: Path, popsize: int = 4, generations: int = 1, log=lambda line: None,
+                  env_id: str = "CartPole-v1") -> Trainer:
+    """A static trainer on one environment, everything in this process, writing into ``folder``."""
+    spec = ProblemSpec((env_id,))
+    return Trainer.start(ESSettings(popsize=popsize), RunSettings(generations=generations, threads=1), spec.build(),
+                         spec.build, spec.env_ids, RunFolder(Path(folder)), env_id, log=log)

@@ -18,6 +18,7 @@ import pytest
 
 import envs
 from envs import ProblemSpec, damaged, recipes
+from policies import PolicySettings
 from es.files import read_metrics
 
 FEET = ("front_left_foot", "right_back_foot")  # bodies of left_ankle_geom and fourth_ankle_geom
@@ -112,7 +113,7 @@ def test_mujoco_damaged_foot_is_shorter():
 
 def test_fitness_over_two_bodies_is_the_mean_of_each_alone():
     pair = ("AntBulletEnv-v0", "AntAsymRightBulletEnv-v0")
-    both = ProblemSpec(pair, "hebbian").build()
+    both = ProblemSpec(pair, PolicySettings("hebbian")).build()
     try:
         params = both.policy.initial_params(np.random.default_rng(4))
         together = [both.evaluate(params, index, seed=1).total_return for index in range(2)]
@@ -120,7 +121,7 @@ def test_fitness_over_two_bodies_is_the_mean_of_each_alone():
         both.close()
     alone = []
     for env_id in pair:
-        problem = ProblemSpec((env_id,), "hebbian").build()
+        problem = ProblemSpec((env_id,), PolicySettings("hebbian")).build()
         try:
             alone.append(problem.evaluate(params, 0, seed=1).total_return)
         finally:

@@ -17,7 +17,8 @@ import pytest
 
 import envs
 from envs import EnvironmentError_, ProblemSpec, make_env, resolve_env_id, rollout
-from envs.problem import make_policy, network_spec
+from envs.problem import network_spec
+from policies import PolicySettings, make_policy
 from tests import custom_env_module
 
 
@@ -82,7 +83,7 @@ def test_custom_environment_in_module_colon_id_form():
     assert recipe.name == "Gymnasium"
     net = network_spec(env, recipe)
     assert net.obs_shape == (2,) and net.n_actions == 2
-    policy = make_policy(ProblemSpec((resolved,)), net, recipe)
+    policy = make_policy(PolicySettings(), net, recipe.normalise_hebbian)
     params = policy.initial_params(np.random.default_rng(0))
     episode = rollout(env, policy, params, seed=0)
     assert episode.steps == custom_env_module.MAX_STEPS  # the registered TimeLimit applies
@@ -139,8 +140,8 @@ def test_car_racing_pixels_are_84x84_floats_in_0_1_transposed_like_the_original(
 
 @pytest.mark.parametrize("kind", ["static", "hebbian"])
 def test_rollout_is_deterministic_for_the_same_params_and_seed(kind):
-    problem = ProblemSpec(("CartPole-v1",), kind).build()
-    other = ProblemSpec(("CartPole-v1",), kind).build()
+    problem = ProblemSpec(("CartPole-v1",), PolicySettings(kind)).build()
+    other = ProblemSpec(("CartPole-v1",), PolicySettings(kind)).build()
     try:
         params = problem.policy.initial_params(np.random.default_rng(3))
         first = problem.evaluate(params, 0, seed=11)
@@ -155,8 +156,8 @@ def test_rollout_is_deterministic_for_the_same_params_and_seed(kind):
 def test_pybullet_ant_rollout_is_the_same_on_a_fresh_and_a_reused_env():
     """pyBullet's first reset loads the model and later ones restore a state; make_env's warm-up
     reset makes a fresh environment behave like a reused one."""
-    problem = ProblemSpec(("AntBulletEnv-v0",), "static").build()
-    fresh = ProblemSpec(("AntBulletEnv-v0",), "static").build()
+    problem = ProblemSpec(("AntBulletEnv-v0",), PolicySettings("static")).build()
+    fresh = ProblemSpec(("AntBulletEnv-v0",), PolicySettings("static")).build()
     try:
         params = problem.policy.initial_params(np.random.default_rng(0))
         first = problem.evaluate(params, 0, seed=5)

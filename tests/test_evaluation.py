@@ -21,6 +21,7 @@ import pytest
 
 from envs import ProblemSpec, rollout
 from envs.evaluation import evaluate, format_table, trace_episode
+from policies import PolicySettings
 from es.files import save_dat
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -36,7 +37,7 @@ def run_script(script: str, *args: str) -> subprocess.CompletedProcess:
 
 def saved_params(tmp_path: Path, env_id: str, kind: str) -> Path:
     """A weight file as the training scripts write it, from the policy's generation-0 parameters."""
-    problem = ProblemSpec((env_id,), kind).build()
+    problem = ProblemSpec((env_id,), PolicySettings(kind)).build()
     try:
         arrays = problem.policy.export(problem.policy.initial_params(np.random.default_rng(4)))
     finally:
@@ -71,7 +72,7 @@ def test_static_table_and_json(tmp_path):
 
 
 def test_mujoco_ant_distance_is_the_torso_displacement():
-    problem = ProblemSpec(("Ant-v5",), "static").build()
+    problem = ProblemSpec(("Ant-v5",), PolicySettings("static")).build()
     try:
         params = problem.policy.initial_params(np.random.default_rng(4))
         (report,) = evaluate(problem, params, episodes=1, seed=3)
@@ -91,7 +92,7 @@ def test_mujoco_ant_distance_is_the_torso_displacement():
 
 
 def test_pybullet_ant_distance_starts_after_the_burn_in():
-    problem = ProblemSpec(("AntBulletEnv-v0",), "hebbian").build()
+    problem = ProblemSpec(("AntBulletEnv-v0",), PolicySettings("hebbian")).build()
     try:
         params = problem.policy.initial_params(np.random.default_rng(4))
         (report,) = evaluate(problem, params, episodes=1, seed=1)
@@ -110,7 +111,7 @@ def test_pybullet_ant_distance_starts_after_the_burn_in():
 
 
 def test_trace_replays_the_first_episode_with_weight_norms():
-    problem = ProblemSpec(("AntBulletEnv-v0",), "hebbian").build()
+    problem = ProblemSpec(("AntBulletEnv-v0",), PolicySettings("hebbian")).build()
     try:
         params = problem.policy.initial_params(np.random.default_rng(4))
         (report,) = evaluate(problem, params, episodes=1, seed=1)

@@ -16,12 +16,11 @@ import numpy as np
 import pytest
 
 import train_static
-from envs import ProblemSpec
 from es import files
-from es.evaluator import Results
-from es.run import Run, TrainConfig
-from es.strategy import shape_fitness
-from tests.run_helpers import Training, descendants, only_run, still_running
+from es.backends import Results
+from es.shaping import rank_std
+from report.log import GenerationLog
+from tests.run_helpers import Training, descendants, only_run, small_trainer, still_running
 
 FAILING_ENV = "tests.failing_env:FailingEnv-v0"
 SMALL = ("--environment", FAILING_ENV, "--popsize", "4", "--seed", "2")
@@ -110,9 +109,10 @@ class _ScriptedReturns:
     def __init__(self, member_returns):
         self.member_returns = np.array(member_returns, dtype=np.float64)
 
-    def evaluate(self, generation, theta, sigma, tasks, progress=None):
+    def evaluate(self, generation, progress=None):
         returns = np.append(self.member_returns, 0.0)
-        return Results(returns, np.ones(len(tasks), dtype=np.int64))
+        n_tasks = len(generation.tasks)
+        return Results(returns, np.ones(n_tasks, dtype=np.int64), np.ones(n_tasks))  # L2 penalties of 1
 
     def close(self):
         pass
@@ -133,20 +133,19 @@ class _RecordingStrategy:
 
 
 def test_nan_and_infinite_returns_are_ranked_last_and_reported(tmp_path):
-    config = TrainConfig(kind="static", environment="CartPole-v1", env_ids=["CartPole-v1"], popsize=6, threads=1,
-                         generations=1)
     lines = []
-    run = Run(config, ProblemSpec(("CartPole-v1",)), tmp_path, log=lines.append)
+    run = small_trainer(tmp_path, popsize=6, log=lines.append)
+    run.reporters = [GenerationLog(lines.append)]
     try:
         run.evaluator.close()
         run.evaluator = _ScriptedReturns([10.0, np.nan, 30.0, np.inf, 20.0, -np.inf])
         run.strategy = _RecordingStrategy(run.strategy)
-        assert run.train() == 0
+        assert run.train().value == "done"
     finally:
         run.close()
     (fitness,) = run.strategy.told
     assert np.isneginf(fitness[[1, 3, 5]]).all() and np.isfinite(fitness[[0, 2, 4]]).all()
-    shaped = shape_fitness(fitness)
+    shaped = rank_std(fitness)
     assert np.argsort(shaped[[0, 2, 4]]).tolist() == [0, 2, 1]
     assert (shaped[[1, 3, 5]] < shaped[[0, 2, 4]].min()).all()  # below every finite member
     assert np.isfinite(run.state.theta).all()

@@ -1,4 +1,4 @@
-"""Run files (es/files.py): the original ``.dat`` format and names, safe loading, atomic writes.
+"""Run files (es/files.py, es/runfolder.py, the policies' file names): the original ``.dat`` format and names, safe loading, atomic writes.
 
 A ``.dat`` file is a float32 numpy array saved with ``torch.save`` (upstream spec §6). The original
 files were written with numpy 1, whose pickles name ``numpy.core.multiarray._reconstruct``; they
@@ -17,15 +17,24 @@ from es.files import (
     METRICS_COLUMNS,
     FileFormatError,
     atomic_write_bytes,
-    fitness_file_name,
-    hebbian_file_name,
     load_dat,
     read_metrics,
     save_dat,
     save_npy,
-    static_file_name,
     write_metrics,
 )
+from es.runfolder import fitness_file_name
+from policies import HebbianPolicy, NetworkSpec, StaticPolicy
+
+ANT = NetworkSpec((28,), 8, squash_out=True)
+
+
+def static_file_name(env, reward, population, generation):
+    return StaticPolicy(ANT).file_name("weights", env, reward, population, generation)
+
+
+def hebbian_file_name(env, reward, rule, init, population, role, generation):
+    return HebbianPolicy(ANT, rule, init).file_name(role, env, reward, population, generation)
 
 # --- .dat round trips ----------------------------------------------------------------------------
 

@@ -15,8 +15,9 @@ import pytest
 
 import plot_run
 import train_static
-from es import files, plots
-from es.progress import LiveDisplay, QuietDisplay, display_for, estimate
+from es import files
+from report import plots
+from report.progress import LiveDisplay, QuietDisplay, display_for, estimate
 from tests.run_helpers import Training, only_run
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"

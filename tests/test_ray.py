@@ -17,7 +17,7 @@ import pytest
 
 import train_static
 from envs import ProblemSpec
-from es.evaluator import EvaluationError, SerialEvaluator
+from es.backends import EvaluationError, Generation, SerialEvaluator
 from es.files import load_dat
 from es.noise import NoiseTable
 from es.worker import make_tasks
@@ -32,7 +32,7 @@ SIGMA = 0.1
 @pytest.fixture(scope="module")
 def ray_session():
     ray = pytest.importorskip("ray", reason="Ray is optional; pip install -r requirements-ray.txt to test it")
-    from es.ray_backend import start_ray
+    from es.backends.ray import start_ray
 
     started = start_ray(None, 2)
     yield ray
@@ -62,7 +62,7 @@ def test_ray_backend_gives_the_process_pools_theta(ray_session, process_run, tmp
     assert np.array_equal(load_dat(ray_run / "last.dat"), expected)
     assert np.array_equal(load_dat(serial_run / "last.dat"), expected)
     config = json.loads((ray_run / "config.json").read_text())
-    assert (config["backend"], config["ray_address"], config["workers"]) == ("ray", None, 2)
+    assert (config["run"]["backend"], config["run"]["ray_address"], config["workers"]) == ("ray", None, 2)
 
 
 def test_run_started_on_ray_resumes_on_the_process_pool(ray_session, process_run, tmp_path):
@@ -86,15 +86,16 @@ def generation():
     tasks = make_tasks(np.arange(POPULATION), np.repeat(noise.sample_indices(rng, dim, pairs), 2),
                        np.tile([1, -1], pairs), np.repeat(rng.integers(0, 2**31 - 1, (pairs, 1)), 2, axis=0),
                        len(ENV_IDS))
-    theta = problem.policy.initial_params(np.random.default_rng(4), "normal")
+    theta = problem.policy.initial_params(np.random.default_rng(4))
     serial = SerialEvaluator(lambda: problem, noise, dim, ENV_IDS)
-    expected = serial.evaluate(0, theta, SIGMA, tasks)
+    work = Generation(0, theta, SIGMA, tasks)
+    expected = serial.evaluate(work)
     serial.close()
-    return dict(tasks=tasks, theta=theta, noise=noise, dim=dim, expected=expected)
+    return dict(work=work, tasks=tasks, noise=noise, dim=dim, expected=expected)
 
 
 def ray_evaluator(build_problem, generation):
-    from es.ray_backend import RayEvaluator
+    from es.backends.ray import RayEvaluator
 
     return RayEvaluator(build_problem, generation["noise"], generation["dim"], ENV_IDS, workers=2)
 
@@ -102,11 +103,12 @@ def ray_evaluator(build_problem, generation):
 def assert_expected_results(results, generation) -> None:
     assert np.array_equal(results.returns, generation["expected"].returns)
     assert np.array_equal(results.steps, generation["expected"].steps)
+    assert np.array_equal(results.penalties, generation["expected"].penalties)
 
 
 def test_killed_actors_are_replaced_and_their_tasks_rerun(ray_session, generation, tmp_path):
     """Also: one episode raises, and is retried."""
-    seed = int(generation["tasks"][9, 4])
+    seed = int(generation["tasks"][9]["seed"])
     evaluator = ray_evaluator(CrashingSpec(seed, "raise", str(tmp_path / "raised")).build, generation)
     first_actors = list(evaluator._actors)
     done = []
@@ -118,21 +120,21 @@ def test_killed_actors_are_replaced_and_their_tasks_rerun(ray_session, generatio
                 ray_session.kill(actor)
 
     try:
-        results = evaluator.evaluate(0, generation["theta"], SIGMA, generation["tasks"], kill_all_after_three)
+        results = evaluator.evaluate(generation["work"], kill_all_after_three)
         assert_expected_results(results, generation)
         assert (tmp_path / "raised").exists()
         assert len(evaluator._actors) == 2 and not set(evaluator._actors) & set(first_actors)
-        assert_expected_results(evaluator.evaluate(0, generation["theta"], SIGMA, generation["tasks"]), generation)
+        assert_expected_results(evaluator.evaluate(generation["work"]), generation)
     finally:
         evaluator.close()
 
 
 def test_worker_that_exits_is_replaced_and_its_task_rerun(ray_session, generation, tmp_path):
-    seed = int(generation["tasks"][5, 4])
+    seed = int(generation["tasks"][5]["seed"])
     spec = CrashingSpec(seed, "exit", marker=str(tmp_path / "failed"), driver_pid=os.getpid())
     evaluator = ray_evaluator(spec.build, generation)
     try:
-        results = evaluator.evaluate(0, generation["theta"], SIGMA, generation["tasks"])
+        results = evaluator.evaluate(generation["work"])
     finally:
         evaluator.close()
     assert (tmp_path / "failed").exists()
@@ -140,11 +142,11 @@ def test_worker_that_exits_is_replaced_and_its_task_rerun(ray_session, generatio
 
 
 def test_task_that_kills_its_worker_twice_stops_the_evaluation(ray_session, generation):
-    seed = int(generation["tasks"][5, 4])
+    seed = int(generation["tasks"][5]["seed"])
     evaluator = ray_evaluator(CrashingSpec(seed, "exit", driver_pid=os.getpid()).build, generation)
     try:
         with pytest.raises(EvaluationError, match=r"CartPole-v1 failed twice for member [45] .*Ray worker died"):
-            evaluator.evaluate(0, generation["theta"], SIGMA, generation["tasks"])
+            evaluator.evaluate(generation["work"])
     finally:
         evaluator.close()
 
@@ -154,7 +156,7 @@ def test_task_that_kills_its_worker_twice_stops_the_evaluation(ray_session, gene
 
 def test_backend_ray_without_ray_says_how_to_install_it(monkeypatch, tmp_path, capsys):
     monkeypatch.setitem(sys.modules, "ray", None)  # import ray now fails, as where it is not installed
-    monkeypatch.delitem(sys.modules, "es.ray_backend", raising=False)
+    monkeypatch.delitem(sys.modules, "es.backends.ray", raising=False)
     code = train_static.main([*CARTPOLE, "--generations", "1", "--threads", "2", "--backend", "ray",
                               "--folder", str(tmp_path)])
     assert code == 2

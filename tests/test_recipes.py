@@ -13,6 +13,7 @@ run on a scripted stub environment instead.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -23,6 +24,9 @@ import envs
 from envs import ProblemSpec, make_env, recipe_for, resolve_env_id, rollout
 from envs.problem import network_spec
 from envs.wrappers import BurnIn, NegativeRewardStop, PixelObservation
+from policies import PolicySettings
+
+ROOT = Path(__file__).resolve().parent.parent
 
 
 class EnvLog(gym.Wrapper):
@@ -235,7 +239,7 @@ def test_ant_recipe_squashes_output_and_switches_off_hebbian_normalisation(ant_e
     assert recipe.name == "pyBullet ant"
     assert recipe.squash_output and network_spec(env, recipe).squash_out
     assert (recipe.stop_patience, recipe.stop_check_after, recipe.burn_in) == (30, 201, 40)
-    problem = ProblemSpec(("AntBulletEnv-v0",), "hebbian").build()
+    problem = ProblemSpec(("AntBulletEnv-v0",), PolicySettings("hebbian")).build()
     try:
         assert problem.net.squash_out and problem.policy.normalise is False
         params = problem.policy.initial_params(np.random.default_rng(0)) * 10
@@ -245,7 +249,7 @@ def test_ant_recipe_squashes_output_and_switches_off_hebbian_normalisation(ant_e
         assert np.all(np.abs(output) <= 1.0)  # tanh is the network's own output activation
     finally:
         problem.close()
-    other = ProblemSpec(("CartPole-v1",), "hebbian").build()
+    other = ProblemSpec(("CartPole-v1",), PolicySettings("hebbian")).build()
     assert other.policy.normalise is True and not other.net.squash_out
     other.close()
 
@@ -347,3 +351,43 @@ def test_pixel_observation_keeps_the_original_transpose():
     np.testing.assert_allclose(observation, np.swapaxes(frame / 255.0, 0, 2), rtol=1e-6)
     with pytest.raises(ValueError, match="RGB"):
         PixelObservation(ScriptedEnv([0.0], shape=(84, 84)))
+
+
+# --- custom recipes reach every process -------------------------------------------------------------
+
+
+def test_a_custom_recipe_reaches_worker_processes_and_resumed_runs(tmp_path, monkeypatch):
+    """Registered in this process by importing a module: worker processes, and a resume in a fresh
+    process, must stop episodes the same way (same env steps, same theta as one process throughout),
+    and config.json names the module."""
+    import json
+    import subprocess
+    import sys
+
+    import train_static
+    from envs import recipes
+    from es.files import load_dat, read_metrics
+
+    monkeypatch.setattr(recipes, "_RECIPES", list(recipes._RECIPES))
+    monkeypatch.setattr(recipes, "_CUSTOM_MODULES", [])
+    monkeypatch.delitem(sys.modules, "tests.custom_recipe", raising=False)
+    import tests.custom_recipe  # noqa: F401  (registers the recipe, in this process only)
+
+    def train(folder, threads: str, generations: str) -> Path:
+        assert train_static.main(["--environment", "tests.custom_env_module:TestCorridor-v0", "--popsize", "8",
+                                  "--generations", generations, "--seed", "3", "--threads", threads,
+                                  "--folder", str(folder)]) == 0
+        (run_dir,) = folder.iterdir()
+        return run_dir
+
+    straight = train(tmp_path / "straight", "1", "3")
+    split = train(tmp_path / "split", "2", "2")
+    resumed = subprocess.run([sys.executable, "train_static.py", "--resume", str(split), "--generations", "3"],
+                             cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert resumed.returncode == 0, resumed.stderr
+    config = json.loads((split / "config.json").read_text())
+    assert config["env"]["recipe_modules"] == ["tests.custom_recipe"]
+    assert "NegativeRewardStop" in config["wrappers"]["tests.custom_env_module:TestCorridor-v0"]
+    steps = [[int(row["env_steps"]) for row in read_metrics(run_dir / "metrics.csv")] for run_dir in (straight, split)]
+    assert steps[0] == steps[1] and sum(steps[0]) < 3 * 9 * 20  # episodes stopped before the corridor's 20 steps
+    assert load_dat(straight / "last.dat").tobytes() == load_dat(split / "last.dat").tobytes()

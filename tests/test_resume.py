@@ -13,10 +13,9 @@ import numpy as np
 import pytest
 
 import train_static
-from envs import ProblemSpec
-from es import run as run_module
-from es.run import Run, TrainConfig, new_run_dir
-from tests.run_helpers import Training, assert_same_run, descendants, only_run, still_running
+from es import runfolder
+from es.runfolder import RunFolder
+from tests.run_helpers import Training, assert_same_run, descendants, only_run, small_trainer, still_running
 
 CARTPOLE = ("--environment", "CartPole-v1", "--popsize", "8", "--seed", "5")
 
@@ -78,21 +77,21 @@ def test_kill_9_of_the_run_takes_its_workers_and_leaves_a_resumable_checkpoint(t
     assert train("--resume", str(run_dir), "--generations", str(reached + 1), "--threads", "1") == 0
 
 
-def _save_forever(run: Run) -> None:
+def _save_forever(run) -> None:
     """In a forked child: checkpoints of generation g hold theta == g everywhere, until killed."""
     try:
         generation = run.state.generation
         while True:
             generation += 1
-            run.state = replace(run.state, theta=np.full(run.dim, generation, np.float32), generation=generation)
+            run.state = replace(run.state, theta=np.full(run.policy.num_params, generation, np.float32),
+                                generation=generation)
             run.save_checkpoint()
     finally:
         os._exit(1)
 
 
 def test_kill_9_during_saves_always_leaves_a_loadable_checkpoint(tmp_path):
-    config = TrainConfig(kind="static", environment="CartPole-v1", env_ids=["CartPole-v1"], popsize=4, threads=1)
-    run = Run(config, ProblemSpec(("CartPole-v1",)), tmp_path, log=lambda line: None)
+    run = small_trainer(tmp_path)
     delays = random.Random(0)
     try:
         run.save_checkpoint()
@@ -103,7 +102,7 @@ def test_kill_9_during_saves_always_leaves_a_loadable_checkpoint(tmp_path):
             time.sleep(delays.uniform(0.002, 0.04))
             os.kill(child, signal.SIGKILL)
             os.waitpid(child, 0)
-            run.load_checkpoint()  # also clears the temporary file of a save the kill cut short (most kills do)
+            run.restore(run.folder.load_checkpoint())  # also clears the temporary files of cut-short saves
             assert np.all(run.state.theta == run.state.generation)
             assert not list(tmp_path.glob(".*.tmp"))
     finally:
@@ -136,8 +135,8 @@ def test_resume_refuses_a_folder_that_is_not_a_run(tmp_path, capsys):
 
 
 def test_runs_started_in_the_same_second_get_different_folders(tmp_path, monkeypatch):
-    monkeypatch.setattr(run_module.time, "strftime", lambda pattern: "20250101-120000")
-    folders = [new_run_dir(tmp_path, "CartPole-v1", 1) for _ in range(3)]
+    monkeypatch.setattr(runfolder.time, "strftime", lambda pattern: "20250101-120000")
+    folders = [RunFolder.create(tmp_path, "CartPole-v1", 1) for _ in range(3)]
     assert [folder.name for folder in folders] == ["20250101-120000_CartPole-v1_seed1",
                                                     "20250101-120000_CartPole-v1_seed1-2",
                                                     "20250101-120000_CartPole-v1_seed1-3"]
@@ -166,3 +165,18 @@ def test_a_corrupt_run_folder_is_one_line_and_exit_2(tmp_path, capsys, damage):
     assert train("--resume", str(run_dir), "--generations", "2") == 2
     error = capsys.readouterr().err.strip().splitlines()
     assert len(error) == 1 and error[0].startswith("train_static.py: error: cannot resume")
+
+
+def test_a_run_folder_of_the_previous_version_resumes(tmp_path, straight_run):
+    """Before settings were sections, config.json was one flat object; such runs still resume."""
+    import json
+
+    assert train(*CARTPOLE, "--threads", "1", "--generations", "2", "--folder", str(tmp_path)) == 0
+    run_dir = only_run(tmp_path)
+    config = json.loads((run_dir / "config.json").read_text())
+    flat = {"kind": config["policy"]["kind"], **config["env"], **config["es"], **config["run"]}
+    flat = {key: value for key, value in flat.items() if key not in ("recipe_modules", "lr_floor", "sigma_decay",
+                                                                      "sigma_floor", "fitness_l2")}
+    (run_dir / "config.json").write_text(json.dumps(flat | {"command": config["command"], "resumed": []}))
+    assert train("--resume", str(run_dir), "--generations", "4") == 0
+    assert_same_run(straight_run, run_dir)

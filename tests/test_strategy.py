@@ -1,4 +1,4 @@
-"""The evolution strategy (es/strategy.py) and its shared noise table (es/noise.py).
+"""The evolution strategy (es/strategy.py, es/shaping.py, es/optimizers.py) and its noise table (es/noise.py).
 
 Exact values where the math is exact: centered ranks, standardisation, the lr and sigma schedules
 of upstream spec §2.1 (steps 4-7), and one SGD step of OpenAI-ES (Salimans et al. 2017) written out
@@ -12,15 +12,26 @@ import numpy as np
 import pytest
 
 from es.noise import NoiseTable
-from es.strategy import (
-    ESState,
-    OpenES,
-    centered_ranks,
-    decay_lr,
-    decay_sigma,
-    shape_fitness,
-    standardise,
-)
+from es.settings import ESSettings
+from es.shaping import centered_ranks, l2_penalty, penalised_fitness, standardise
+from es.shaping import rank_std as shape_fitness
+from es.strategy import ESState, OpenES
+from es.strategy import decay_lr as decay_lr_with
+from es.strategy import decay_sigma as decay_sigma_with
+
+DEFAULTS = ESSettings()
+
+
+def decay_lr(lr, decay):
+    return decay_lr_with(lr, ESSettings(decay=decay))
+
+
+def decay_sigma(sigma):
+    return decay_sigma_with(sigma, DEFAULTS)
+
+
+def open_es(population_size, decay=0.995):
+    return OpenES(ESSettings(popsize=population_size, decay=decay))
 
 # --- fitness shaping -----------------------------------------------------------------------------
 
@@ -125,7 +136,7 @@ def tiny_table():
 
 
 def test_ask_returns_mirrored_members_in_order():
-    strategy = OpenES(population_size=6, decay=0.995)
+    strategy = open_es(6)
     table = NoiseTable(np.arange(100, dtype=np.float32))
     indices, signs = strategy.ask(np.random.default_rng(3), table, dim=10)
     assert indices.shape == signs.shape == (6,)
@@ -134,7 +145,7 @@ def test_ask_returns_mirrored_members_in_order():
 
 
 def test_one_tell_step_matches_the_formula_written_by_hand():
-    strategy = OpenES(population_size=4, decay=0.995)
+    strategy = open_es(4)
     table = tiny_table()
     eps1, eps2 = np.array([1.0, -2.0]), np.array([0.5, 3.0])
     theta = np.array([0.25, -1.0], dtype=np.float32)
@@ -161,7 +172,7 @@ def test_one_tell_step_matches_the_formula_written_by_hand():
 
 
 def test_mirrored_pair_with_equal_fitness_contributes_nothing():
-    strategy = OpenES(population_size=4, decay=0.995)
+    strategy = open_es(4)
     table = tiny_table()
     theta = np.zeros(2, dtype=np.float32)
     state = ESState(theta=theta, lr=0.2, sigma=0.1)
@@ -177,7 +188,7 @@ def test_mirrored_pair_with_equal_fitness_contributes_nothing():
 
 
 def test_update_factor_is_0_01_at_the_defaults():
-    strategy = OpenES(population_size=200, decay=0.995)
+    strategy = open_es(200)
     table = NoiseTable.create(seed=0, size=1000)
     state = ESState(theta=np.zeros(5, dtype=np.float32), lr=0.2, sigma=0.1)
     indices, _ = strategy.ask(np.random.default_rng(0), table, dim=5)
@@ -187,7 +198,7 @@ def test_update_factor_is_0_01_at_the_defaults():
 
 
 def test_all_equal_fitness_skips_the_step_but_decays_the_schedules():
-    strategy = OpenES(population_size=4, decay=0.995)
+    strategy = open_es(4)
     theta = np.array([0.25, -1.0], dtype=np.float32)
     state = ESState(theta=theta, lr=0.2, sigma=0.1, generation=7)
     new_state, metrics = strategy.tell(state, tiny_table(), np.array([0, 0, 2, 2]), np.full(4, 3.0))
@@ -200,11 +211,11 @@ def test_all_equal_fitness_skips_the_step_but_decays_the_schedules():
 @pytest.mark.parametrize("population_size", [0, 1, 3, 201, -2])
 def test_odd_or_too_small_population_is_rejected(population_size):
     with pytest.raises(ValueError, match=str(population_size)):
-        OpenES(population_size=population_size, decay=0.995)
+        open_es(population_size)
 
 
 def test_tell_rejects_the_wrong_number_of_fitness_values():
-    strategy = OpenES(population_size=4, decay=0.995)
+    strategy = open_es(4)
     state = ESState(theta=np.zeros(2, dtype=np.float32), lr=0.2, sigma=0.1)
     with pytest.raises(ValueError, match="expected 4 fitness values"):
         strategy.tell(state, tiny_table(), np.array([0, 0, 2, 2]), np.ones(6))
@@ -252,3 +263,20 @@ def test_sample_indices_stay_within_bounds():
     assert np.array_equal(table.sample_indices(np.random.default_rng(0), dim=50, count=3), [0, 0, 0])
     with pytest.raises(ValueError, match="smaller than the 51 parameters"):
         table.sample_indices(np.random.default_rng(0), dim=51, count=1)
+
+
+# --- the fitness penalty and settings as data ----------------------------------------------------
+
+
+def test_l2_penalty_and_penalised_fitness_exact_values():
+    assert l2_penalty(np.array([1.0, -2.0, 3.0], dtype=np.float32)) == 14 / 3
+    fitness = penalised_fitness(np.array([10.0, np.nan, 5.0, np.inf]), np.array([1.0, 1.0, 4.0, 0.0]), 0.5)
+    np.testing.assert_array_equal(fitness, [9.5, -np.inf, 3.0, -np.inf])
+
+
+def test_the_constants_the_original_hard_coded_are_settings():
+    assert (DEFAULTS.lr_floor, DEFAULTS.sigma_decay, DEFAULTS.sigma_floor, DEFAULTS.fitness_l2) == (0.001, 0.999,
+                                                                                                   0.01, 0.01)
+    settings = ESSettings(lr_floor=0.15, sigma_decay=0.5, sigma_floor=0.05)
+    assert decay_lr_with(0.2, settings) == 0.2 * 0.995 and decay_lr_with(0.15, settings) == 0.15
+    assert decay_sigma_with(0.1, settings) == 0.05 and decay_sigma_with(0.05, settings) == 0.05

@@ -128,8 +128,11 @@ def check_common_files(run_dir: Path, generations: int, seed: int, population: i
     assert len(fitness_files) == 1
     np.testing.assert_allclose(np.load(fitness_files[0]), [float(row["fitness_mean"]) for row in rows])
     config = json.loads((run_dir / "config.json").read_text())
-    assert (config["seed"], config["popsize"], config["generations"]) == (seed, population, generations)
-    assert config["env_ids"] == ["CartPole-v1"]
+    assert (config["run"]["seed"], config["es"]["popsize"], config["run"]["generations"]) == (seed, population,
+                                                                                             generations)
+    assert config["env"]["env_ids"] == ["CartPole-v1"]
+    assert config["wrappers"] == {"CartPole-v1": ["ArgmaxAction", "TimeLimit", "OrderEnforcing", "PassiveEnvChecker",
+                                                  "CartPoleEnv"]}
     assert {"numpy", "gymnasium", "torch"} <= set(config["versions"])
     return rows
 
@@ -198,7 +201,7 @@ def test_odd_popsize_is_rounded_up_with_a_notice(worker_count_runs):
     notice = next(line for line in out.splitlines() if "--popsize 15" in line)
     assert "16" in notice
     assert len(list(run_dir.glob("CartPole-v1__rew_*__pop_16__0.dat"))) == 1
-    assert json.loads((run_dir / "config.json").read_text())["popsize"] == 16
+    assert json.loads((run_dir / "config.json").read_text())["es"]["popsize"] == 16
 
 
 def test_custom_environment_trains_in_worker_processes(tmp_path):
@@ -342,3 +345,45 @@ def test_evaluate_with_render_false_writes_a_video(tmp_path, static_run):
         frame = reader.get_data(0)
     assert frames == steps + 1  # the reset frame and one per step
     assert frame.shape[2] == 3 and frame.shape[:2] in ((400, 600), (400, 608))
+
+
+# --- experiment files (--config) --------------------------------------------------------------------
+
+
+def test_an_experiment_file_configures_a_run_and_flags_given_too_override_it(tmp_path):
+    experiment = tmp_path / "experiment.toml"
+    experiment.write_text('[policy]\nkind = "static"\n\n[env]\nenvironment = "CartPole-v1"\n\n'
+                          '[es]\npopsize = 6\nlr = 0.05\nsigma = 0.3\nfitness_l2 = 0.0\n\n'
+                          '[run]\ngenerations = 1\nseed = 9\nthreads = 1\n')
+    code, out, err = run_in_process(train_static.main, "--config", experiment, "--lr", "0.07",
+                                    "--folder", tmp_path / "runs")
+    assert code == 0, err
+    config = json.loads((only_run_dir(tmp_path / "runs") / "config.json").read_text())
+    assert (config["es"]["popsize"], config["es"]["lr"], config["es"]["sigma"], config["es"]["fitness_l2"]) == (
+        6, 0.07, 0.3, 0.0)
+    assert (config["run"]["seed"], config["run"]["generations"], config["env"]["env_ids"]) == (9, 1, ["CartPole-v1"])
+
+
+@pytest.mark.parametrize("text, message", [
+    ('[policy]\nkind = "hebbian"\n', "is a hebbian experiment; run it with train_hebb.py"),
+    ('[es]\nlearning_rate = 0.1\n', "unknown settings es.learning_rate"),
+    ('[es\n', "--config"),
+])
+def test_a_wrong_experiment_file_is_one_line_and_exit_2(tmp_path, text, message):
+    experiment = tmp_path / "experiment.toml"
+    experiment.write_text(text)
+    code, out, err = run_in_process(train_static.main, "--config", experiment, "--folder", tmp_path / "runs")
+    assert code == 2 and len(err.strip().splitlines()) == 1 and message in err, err
+    assert not (tmp_path / "runs").exists()
+
+
+def test_the_papers_experiment_files_hold_the_papers_settings():
+    from cli.config import TrainConfig
+
+    for path in sorted((ROOT / "experiments" / "paper").glob("*.toml")):
+        config = TrainConfig.from_toml(path)
+        assert (config.es.popsize, config.es.lr, config.es.decay, config.es.sigma) == (200, 0.2, 0.995, 0.1), path
+        assert config.run.generations == 300 and config.run.threads == -1, path
+        assert config.policy.kind == ("hebbian" if "hebbian" in path.stem else "static"), path
+        if config.policy.kind == "hebbian":
+            assert (config.policy.hebb_rule, config.policy.init_weights) == ("ABCD_lr", "uni"), path

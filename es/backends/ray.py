@@ -10,7 +10,7 @@ DESIGN.md unchanged:
   place (zero-copy, read-only), actors on other nodes fetch it once;
 - theta is put once per generation and only its reference travels with each chunk;
 - a chunk is task rows and their indices, and comes back as (task index, kind, payload) per task;
-- chunks hold about 0.1 s of work (``chunk_size``, shared with the process pool), are handed out
+- chunks hold about 0.1 s of work (``ChunkSizer``, shared with the process pool), are handed out
   as actors finish (``ray.wait``), and results are written back by task index, so the outcome is
   the same as with the serial evaluator and the process pool.
 
@@ -29,14 +29,13 @@ import os
 import re
 import signal
 import socket
-import time
 from typing import Callable
 
 import numpy as np
 import ray
 from ray.exceptions import RayActorError, RayError
 
-from es.evaluator import Progress, Results, WorkerStartError, _Generation, chunk_size
+from es.backends.base import ChunkSizer, Generation, Progress, Results, TaskBook, WorkerStartError
 from es.noise import NoiseTable
 from es.worker import Worker, pin_threads
 
@@ -140,7 +139,7 @@ class _WorkerActor:
 
     def run(self, generation: int, sigma: float, theta: np.ndarray, indices: list[int],
             rows: np.ndarray) -> list[tuple[int, str, object]]:
-        """Run a chunk; (task index, "result", (return, steps)) or (task index, "error", message)."""
+        """Run a chunk; (task index, "result", (return, steps, penalty)) or (task index, "error", message)."""
         self.worker.theta = theta  # Ray resolved the generation's reference: a read-only view
         return [(index, *self.worker.run(generation, sigma, row)) for index, row in zip(indices, rows)]
 
@@ -157,11 +156,11 @@ class RayEvaluator:
         self.env_ids, self._build_problem, self._dim = env_ids, build_problem, dim
         self._actors: list = []
         self._starting: dict = {}  # ready() reference -> actor not yet ready
-        self._task_seconds: float | None = None
         self._noise = None
         self._owns_ray = start_ray(address, workers)
         try:
             self.workers = actor_count(workers)
+            self._chunks = ChunkSizer(self.workers)
             self._noise = ray.put(noise.array)
             for _ in range(self.workers):  # they start in parallel
                 self._launch()
@@ -187,19 +186,19 @@ class RayEvaluator:
         self._actors.append(actor)
         return actor
 
-    def evaluate(self, generation: int, theta: np.ndarray, sigma: float, tasks: np.ndarray,
-                 progress: Progress | None = None) -> Results:
-        started = time.perf_counter()
-        run = _Generation(tasks, self.env_ids, progress)
-        theta_ref = ray.put(np.ascontiguousarray(theta, dtype=np.float32))
-        size = chunk_size(len(tasks), self.workers, self._task_seconds)
+    def evaluate(self, generation: Generation, progress: Progress | None = None) -> Results:
+        tasks = generation.tasks
+        book = TaskBook(tasks, self.env_ids, progress)
+        theta_ref = ray.put(np.ascontiguousarray(generation.theta, dtype=np.float32))
+        size = self._chunks.size(len(tasks))
         suspects: set[int] = set()  # tasks of a chunk whose actor died: re-run one at a time
         idle = list(self._actors)
         in_flight: dict = {}  # result reference -> (actor, task indices)
-        while run.remaining:
-            while idle and run.waiting:
-                actor, indices = idle.pop(), _next_chunk(run, size, suspects)
-                in_flight[actor.run.remote(generation, sigma, theta_ref, indices, tasks[indices])] = actor, indices
+        while book.remaining:
+            while idle and book.waiting:
+                actor, indices = idle.pop(), book.next_chunk(size, alone=suspects)
+                reference = actor.run.remote(generation.number, generation.sigma, theta_ref, indices, tasks[indices])
+                in_flight[reference] = actor, indices
             done, _ = ray.wait([*in_flight, *self._starting], num_returns=1, timeout=WAIT_SECONDS)
             for ref in done:
                 if ref in self._starting:
@@ -209,24 +208,24 @@ class RayEvaluator:
                 try:
                     outcomes = ray.get(ref)
                 except RayActorError as error:
-                    self._replace(actor, indices, run, suspects, error)
+                    self._replace(actor, indices, book, suspects, error)
                     continue
                 for index, kind, payload in outcomes:
-                    run.record(index, kind, payload)
+                    book.record(index, kind, payload)
                 idle.append(actor)
-        self._task_seconds = (time.perf_counter() - started) * self.workers / max(len(tasks), 1)
-        return run.results
+        self._chunks.finished(len(tasks))
+        return book.results
 
-    def _replace(self, actor, indices: list[int], run: _Generation, suspects: set[int],
+    def _replace(self, actor, indices: list[int], book: TaskBook, suspects: set[int],
                  error: RayActorError) -> None:
         """Start a fresh actor for a dead one; its unfinished tasks go back in the queue."""
         self._actors.remove(actor)
         ray.kill(actor, no_restart=True)  # it may only be unreachable: make sure it is gone
         self._launch()
-        run.waiting.extendleft(reversed(indices))
+        book.put_back(indices)
         suspects.update(indices)
         if len(indices) == 1:  # alone in its chunk: this task is what the actor was running
-            run.attempts.failed(indices[0], f"Ray worker died ({_death_reason(error)})")
+            book.failed(indices[0], f"Ray worker died ({_death_reason(error)})")
 
     def close(self) -> None:
         """Kill the actors; disconnect from Ray if this evaluator connected (a local Ray stops too)."""
@@ -273,13 +272,3 @@ def _interrupts_held():
             _set_sigint(previous)
     if received:
         raise KeyboardInterrupt
-
-
-def _next_chunk(run: _Generation, size: int, suspects: set[int]) -> list[int]:
-    """The next ``size`` waiting tasks, or a suspect task alone."""
-    chunk = [run.waiting.popleft()]
-    if chunk[0] in suspects:
-        return chunk
-    while len(chunk) < size and run.waiting and run.waiting[0] not in suspects:
-        chunk.append(run.waiting.popleft())
-    return chunk

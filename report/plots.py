@@ -1,6 +1,6 @@
 """Learning curves from ``metrics.csv``: a run's own ``fitness.png``, and several runs overlaid.
 
-Fitness is what the strategy ranks: the mean episode return minus the L2 penalty (``es.run``).
+Fitness is what the strategy ranks: the mean episode return minus the L2 penalty (``es.shaping``).
 One run's picture shows, per generation, the population's mean, the band between its min and
 max, the best fitness seen so far, and the return of the unperturbed centre theta (the one that
 picks ``best.dat``). The comparison overlays the mean and best-so-far of several runs.

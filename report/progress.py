@@ -6,7 +6,7 @@ the generation ends, leaving only the run's one line per generation. When stdout
 (CI, ``nohup``, a file) nothing is drawn, so the output stays exactly one line per generation.
 
 A display's ``generation(...)`` context yields the ``progress(n_done, steps)`` callback that the
-evaluators accept (``es.evaluator``), or None when there is nothing to show.
+backends accept (``es.backends``), or None when there is nothing to show.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from typing import ContextManager, Iterator, Protocol, TextIO
 
 from tqdm import tqdm
 
-from es.evaluator import Progress as Callback  # (episodes just finished, their env steps)
+from es.backends import Progress as Callback  # (episodes just finished, their env steps)
 
 RECENT_GENERATIONS = 5  # the run ETA assumes the coming generations take as long as these did
 

@@ -1,0 +1,259 @@
+"""``train_static.py`` and ``train_hebb.py``: their flags, the run's configuration, start and resume.
+
+The flags keep the original names and defaults (upstream spec §1); new ones use the same snake_case
+style. A new run's settings come from the flags (over an experiment file given with ``--config``);
+a resumed run's from its config.json, where only what changes no result may be given again.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import secrets
+import sys
+from dataclasses import fields
+from pathlib import Path
+
+import envs
+from cli.config import SECTIONS, TrainConfig, field_names, read_toml
+from cli.errors import USER_ERRORS, Parser, UserError, explained
+from cli.flags import positive_float, positive_int, threads_value
+from cli.hints import TRAIN_SCRIPTS, evaluate_hint, resume_hint
+from envs import EnvSettings, ProblemSpec
+from es.backends import BACKENDS
+from es.loop import Status, Trainer
+from es.runfolder import RunFolder, SaveError
+from es.settings import RESUMABLE, ESSettings, RunSettings
+from policies import PolicySettings
+from report.log import FitnessPlot, GenerationLog
+from report.progress import display_for
+
+EXIT_CODES = {Status.DONE: 0, Status.FAILED: 1, Status.INTERRUPTED: 130}
+
+
+def training_parser(prog: str, description: str, folder: str) -> Parser:
+    parser = Parser(prog=prog, description=description, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    add = parser.add_argument
+    add("--environment", default="CarRacing-v0", metavar="ID",
+        help="Gymnasium, pyBullet or MuJoCo id, or module:Id for a custom environment; several ids "
+             "separated by commas are trained together (fitness = mean over them)")
+    add("--popsize", type=int, default=200, metavar="N", help="population size (even: mirrored pairs)")
+    add("--print_every", type=positive_int, default=1, metavar="K", help="save files every K generations")
+    add("--lr", type=positive_float, default=0.2, help="ES learning rate")
+    add("--decay", type=positive_float, default=0.995, help="learning-rate decay per generation")
+    add("--sigma", type=positive_float, default=0.1, help="initial noise standard deviation")
+    add("--generations", type=positive_int, default=300, metavar="G",
+        help="number of generations (with --resume: the total, counting those already run)")
+    add("--folder", default=folder, metavar="DIR", help="where run folders are created")
+    add("--threads", type=threads_value, default=-1, metavar="W",
+        help="worker processes; -1 = all cores, 1 = run in this process")
+    add("--seed", type=int, default=None, help="seed of the run (default: a random one, printed and saved)")
+    add("--episodes", type=positive_int, default=1, metavar="E",
+        help="episodes per fitness evaluation (the fitness is their mean)")
+    add("--resume", default=None, metavar="RUN_DIR", help="continue the run saved in RUN_DIR")
+    add("--config", default=None, metavar="FILE",
+        help="an experiment file (TOML, as experiments/paper/*.toml) giving the settings; flags given too "
+             "override it")
+    add("--backend", choices=BACKENDS, default="process",
+        help="parallel backend for --threads > 1: a process pool on this machine, or Ray (one machine "
+             "or a cluster; pip install -r requirements-ray.txt)")
+    add("--ray_address", default=None, metavar="ADDRESS",
+        help="with --backend ray: 'auto' joins the cluster `ray start` runs on this machine, HOST:PORT "
+             "another one; default: start a local Ray with --threads CPUs")
+    return parser
+
+
+def given_flags(argv: list[str]) -> set[str]:
+    """The names of the flags on the command line (``--lr 0.1`` and ``--lr=0.1`` alike)."""
+    return {item[2:].split("=")[0] for item in argv if item.startswith("--")}
+
+
+def resolve_environments(text: str) -> tuple[str, ...]:
+    ids = [part.strip() for part in text.split(",") if part.strip()]
+    if not ids:
+        raise UserError("--environment is empty; give an id such as CartPole-v1")
+    return tuple(envs.resolve_env_id(env_id) for env_id in ids)
+
+
+def population_size(requested: int) -> int:
+    if requested < 2:
+        raise UserError(f"--popsize must be at least 2 (one mirrored pair), got {requested}")
+    if requested % 2:
+        print(f"note: --popsize {requested} is odd; mirrored sampling needs pairs, using {requested + 1}")
+        return requested + 1
+    return requested
+
+
+def config_from_args(kind: str, args: argparse.Namespace, argv: list[str]) -> TrainConfig:
+    """The flags' values, over those of the experiment file ``--config`` names, if any."""
+    values = {name: value for name, value in vars(args).items() if name not in ("resume", "config")}
+    if args.config is not None:
+        given = given_flags(argv)
+        values.update({name: value for name, value in experiment_values(args.config, kind).items()
+                       if name not in given})
+    if values["ray_address"] is not None and values["backend"] != "ray":
+        raise UserError(f"--ray_address {values['ray_address']} needs --backend ray")
+    seed = values["seed"] if values["seed"] is not None else secrets.randbelow(2**31)
+    env = EnvSettings(values["environment"], resolve_environments(values["environment"]),
+                      envs.custom_recipe_modules())
+    return TrainConfig(
+        es=ESSettings(**{**pick(ESSettings, values), "popsize": population_size(values["popsize"])}),
+        policy=PolicySettings(**{**pick(PolicySettings, values), "kind": kind}),
+        env=env, run=RunSettings(**{**pick(RunSettings, values), "seed": seed}))
+
+
+def experiment_values(path: str, kind: str) -> dict:
+    """The settings an experiment file gives, flat (``{"lr": 0.2, ...}``); checked against the script."""
+    try:
+        sections = read_toml(path)
+    except (OSError, ValueError) as error:
+        raise UserError(f"--config {path}: {error}") from None
+    unknown = [f"[{name}]" for name in sections if name not in SECTIONS and name != "evaluation"]
+    unknown += [f"{name}.{key}" for name, section in sections.items() if name in SECTIONS
+                for key in section if key not in field_names(SECTIONS[name])]
+    if unknown:
+        raise UserError(f"--config {path}: unknown settings {', '.join(unknown)}")
+    if sections.get("policy", {}).get("kind", kind) != kind:
+        found = sections["policy"]["kind"]
+        raise UserError(f"--config {path} is a {found} experiment; run it with {TRAIN_SCRIPTS.get(found, 'its script')}")
+    return {key: value for name in SECTIONS for key, value in sections.get(name, {}).items() if key != "env_ids"}
+
+
+def pick(settings: type, values: dict) -> dict:
+    names = {item.name for item in fields(settings)}
+    return {name: value for name, value in values.items() if name in names}
+
+
+def config_for_resume(kind: str, args: argparse.Namespace, argv: list[str]) -> tuple[TrainConfig, RunFolder]:
+    folder = RunFolder.existing(args.resume)
+    try:
+        config = TrainConfig.from_dict(folder.read_config())
+    except (ValueError, TypeError) as error:
+        raise UserError(f"--resume {folder.path}: unreadable config.json ({error})") from None
+    if config.policy.kind != kind:
+        raise UserError(f"--resume {folder.path}: this is a {config.policy.kind} run; resume it with "
+                        f"{TRAIN_SCRIPTS[config.policy.kind]}")
+    changed = {name: getattr(args, name) for name in RESUMABLE if name in given_flags(argv)}
+    return config.with_values(**changed), folder
+
+
+def check_writable(folder: str) -> None:
+    """Refuse, before anything is built or created, a --folder that could not hold a run folder."""
+    path = Path(folder)
+    existing = next((parent for parent in (path, *path.parents) if parent.exists()), Path("."))
+    if not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK):
+        raise UserError(f"--folder {folder}: {existing} is not a writable folder")
+
+
+def versions() -> dict:
+    import importlib.metadata as metadata
+
+    found = {"python": sys.version.split()[0]}
+    for package in ("numpy", "torch", "gymnasium", "mujoco", "pybullet", "pybullet-envs-gymnasium",
+                    "box2d", "numba", "ray"):
+        try:
+            found[package] = metadata.version(package)
+        except metadata.PackageNotFoundError:
+            pass
+    return found
+
+
+def write_config(trainer: Trainer, config: TrainConfig, problem, command: list[str]) -> None:
+    """config.json: the settings (with the noise size the run uses), then what they led to; a
+    resume keeps the first command and lists its own under "resumed"."""
+    folder = trainer.folder
+    earlier = folder.read_config() if (folder.path / "config.json").exists() else {}
+    line = " ".join(command)
+    data = TrainConfig(trainer.es, config.policy, config.env, config.run).to_dict()
+    data.update(command=earlier.get("command", line), resumed=earlier.get("resumed", []) + ([line] if earlier else []),
+                versions=versions(), num_params=trainer.policy.num_params, layout=trainer.policy.layout.describe(),
+                workers=trainer.evaluator.workers, wrappers=problem.wrappers())
+    folder.write_config(data)
+
+
+def start(config: TrainConfig, folder: RunFolder | None) -> tuple[Trainer, object]:
+    """The trainer of a new run (``folder`` None: created once the environments are made) or of a
+    resumed one."""
+    spec = ProblemSpec(config.env.env_ids, config.policy, config.env.recipe_modules)
+    with explained("cannot make the environments"):
+        problem = spec.build()
+    created = folder is None
+    try:
+        if created:
+            try:
+                folder = RunFolder.create(config.run.folder, config.env.label, config.run.seed)
+            except OSError as error:
+                raise UserError(f"--folder {config.run.folder}: {error.strerror or error}") from None
+        with explained("cannot start the run"):
+            trainer = Trainer.start(config.es, config.run, problem, spec.build, config.env.env_ids, folder,
+                                    config.env.label, log=log, display=display_for(sys.stdout),
+                                    reporters=[GenerationLog(log), FitnessPlot()])
+    except BaseException:
+        problem.close()
+        if created and folder is not None and not any(folder.path.iterdir()):
+            folder.path.rmdir()
+        raise
+    return trainer, problem
+
+
+def train_main(kind: str, parser: Parser, argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    args = parser.parse_args(argv)
+    trainer = None
+    try:
+        if args.resume:
+            config, folder = config_for_resume(kind, args, argv)
+        else:
+            config, folder = config_from_args(kind, args, argv), None
+            check_writable(config.run.folder)
+        trainer, problem = start(config, folder)
+        if folder is None:
+            write_config(trainer, config, problem, [parser.prog, *argv])
+            trainer.save_checkpoint()  # resumable from the start, even if the first generation fails
+        else:
+            with explained("cannot resume"):
+                trainer.restore(folder.load_checkpoint())
+            done = trainer.state.generation
+            if done >= config.run.generations:
+                log(f"{folder.path} has already run {done} generations; nothing to do "
+                    f"(--generations is the total: pass more than {done} to continue)")
+                return 0
+            log(f"resuming {folder.path} at generation {done} of {config.run.generations}")
+            write_config(trainer, config, problem, [parser.prog, *argv])  # the new settings and the command
+        log(f"run folder: {trainer.folder.path} | environment: {', '.join(config.env.env_ids)} | parameters: "
+            f"{trainer.policy.num_params} | workers: {trainer.evaluator.workers} | seed: {config.run.seed}")
+        status = trainer.train()
+        report_end(trainer, config, status)
+        return EXIT_CODES[status]
+    except (*USER_ERRORS, SaveError) as error:  # SaveError here: before training started
+        print(f"{parser.prog}: error: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        resume = (f" (resume with: {resume_hint(config, trainer.folder.path)})"
+                  if trainer is not None and trainer.folder.checkpoint_generation is not None else "")
+        print(f"{parser.prog}: stopped at once; saved files are intact{resume}", file=sys.stderr)
+        return 130
+    finally:
+        if trainer is not None:
+            trainer.close()
+
+
+def report_end(trainer: Trainer, config: TrainConfig, status: Status) -> None:
+    """The run's last line: how to evaluate it, or how to resume it."""
+    folder = trainer.folder
+    if status is Status.DONE:
+        # Not ``best``: that is the centre with the best single-episode return, a noisy choice.
+        paths = {role: folder.named_path("last", role) for role in trainer.policy.roles}
+        log(f"done; evaluate with: {evaluate_hint(config, paths)}")
+    elif status is Status.INTERRUPTED:
+        log(f"interrupted after generation {trainer.state.generation}; resume with: "
+            f"{resume_hint(config, folder.path)}")
+    elif folder.checkpoint_generation is None:
+        log("stopped; no checkpoint could be written")
+    else:
+        log(f"stopped; the checkpoint holds generation {folder.checkpoint_generation}; "
+            f"resume with: {resume_hint(config, folder.path)}")
+
+
+def log(line: str) -> None:
+    print(line, flush=True)

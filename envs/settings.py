@@ -1,0 +1,18 @@
+"""The environment settings of a run, as frozen data (``config`` joins them with the others)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class EnvSettings:
+    environment: str = "CarRacing-v0"  # as given on the command line: one id, or several separated by commas
+    env_ids: tuple[str, ...] = ()  # the registered ids made (resolved when a run starts); fitness: their mean
+    recipe_modules: tuple[str, ...] = ()  # modules that register custom recipes (``envs.recipes``)
+
+    @property
+    def label(self) -> str:
+        """The environment part of the original file names: the ids as given, joined by '+',
+        without the ``module:`` part of custom ids (a colon is not portable in file names)."""
+        return "+".join(part.strip().rpartition(":")[2] for part in self.environment.split(",") if part.strip())

@@ -1,0 +1,15 @@
+"""The evolution strategy and its distribution: arrays and workers, never an environment, a policy
+kind or a script by name.
+
+    loop.py        one generation, top to bottom: ask -> tasks -> evaluate -> fitness -> tell -> record
+    strategy.py    OpenAI-ES ask/tell (Salimans et al. 2017), shaping and optimiser injected
+    shaping.py     the fitness penalty and the fitness shaping
+    optimizers.py  the step (the original's SGD)
+    settings.py    ESSettings, RunSettings: the settings as frozen data
+    runfolder.py   the files of a run: names, best/last, metrics, the checkpoint
+    backends/      serial, process pool, Ray: one Evaluator interface, chunking and retries once
+    worker.py      the wire protocol: a task record -> an episode's return, steps and penalty
+    noise.py       the shared noise table
+    files.py       atomic writes, the original .dat format, safe loading
+    interrupts.py  Ctrl-C and SIGTERM: finish the generation, save, stop
+"""

@@ -1,0 +1,146 @@
+"""What every backend shares: the interface, one generation's inputs and results, and the task
+book-keeping that hands out chunks and retries failures, written once.
+
+A backend runs a ``Generation``'s tasks (``es.worker.TASK_DTYPE``) and returns their ``Results`` in
+task order, so the outcome never depends on the backend, the number of workers or the scheduling.
+
+Chunks: work is handed out in chunks of about ``CHUNK_SECONDS``, and at most a quarter of a
+worker's fair share, so that no worker idles while another finishes a long episode.
+
+Failures: an episode that raises, or a worker that dies (segfault, out of memory, a lost machine),
+is retried once (on a fresh environment, or a fresh worker) and reported in ``Results.retried``. A
+second failure of the same task stops the evaluation with an ``EvaluationError`` naming the
+member, the environment and the error.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Iterable, Protocol
+
+import numpy as np
+
+MAX_ATTEMPTS = 2
+CHUNK_SECONDS = 0.1
+
+Progress = Callable[[int, int], None]  # (episodes just finished, their env steps)
+
+
+@dataclass(frozen=True)
+class Generation:
+    """One generation's work: theta and sigma are published once, the tasks say what to run."""
+
+    number: int  # generations done before this one
+    theta: np.ndarray  # float32
+    sigma: float
+    tasks: np.ndarray  # es.worker.TASK_DTYPE
+
+
+@dataclass
+class Results:
+    returns: np.ndarray  # float64, task order
+    steps: np.ndarray  # int64, task order
+    penalties: np.ndarray  # float64, task order: mean(theta_m^2) over the penalised parameters
+    retried: list[str] = field(default_factory=list)  # one message per episode that failed once
+
+    @classmethod
+    def empty(cls, n_tasks: int) -> "Results":
+        return cls(np.zeros(n_tasks), np.zeros(n_tasks, dtype=np.int64), np.zeros(n_tasks))
+
+
+class Evaluator(Protocol):
+    """The one interface of the serial, process and Ray backends."""
+
+    workers: int
+
+    def evaluate(self, generation: Generation, progress: Progress | None = None) -> Results:
+        """Run every task of ``generation``; results in task order."""
+
+    def close(self) -> None:
+        """Stop the workers and free what they hold."""
+
+
+class WorkerStartError(RuntimeError):
+    """A worker (process or actor) could not build its environments or start at all."""
+
+
+def describe_failure(task: np.void, env_ids: tuple[str, ...], how: str, message: str) -> str:
+    """'<env> failed <how> for member <m> (episode seed <s>): <message>'."""
+    who = "the unperturbed centre" if task["noise_index"] < 0 else f"member {int(task['member'])}"
+    return f"{env_ids[int(task['env_index'])]} failed {how} for {who} (episode seed {int(task['seed'])}): {message}"
+
+
+class EvaluationError(RuntimeError):
+    """A task failed twice; the message names the environment, the member and the error."""
+
+    def __init__(self, task: np.void, env_ids: tuple[str, ...], message: str):
+        super().__init__(describe_failure(task, env_ids, "twice", message))
+
+
+class TaskBook:
+    """Book-keeping of one generation's tasks: the waiting queue, the results, the failures."""
+
+    def __init__(self, tasks: np.ndarray, env_ids: tuple[str, ...], progress: Progress | None):
+        self.tasks, self.env_ids = tasks, env_ids
+        self.results = Results.empty(len(tasks))
+        self.waiting = collections.deque(range(len(tasks)))
+        self.remaining = len(tasks)
+        self._failures = np.zeros(len(tasks), dtype=np.int64)
+        self._progress = progress
+
+    def next_chunk(self, size: int, alone: set[int] = frozenset()) -> list[int]:
+        """The next ``size`` waiting tasks, or a task of ``alone`` by itself."""
+        chunk = [self.waiting.popleft()]
+        if chunk[0] in alone:
+            return chunk
+        while len(chunk) < size and self.waiting and self.waiting[0] not in alone:
+            chunk.append(self.waiting.popleft())
+        return chunk
+
+    def put_back(self, indices: Iterable[int]) -> None:
+        """Unfinished tasks go back to the front of the queue, in order."""
+        self.waiting.extendleft(reversed(list(indices)))
+
+    def record(self, index: int, kind: str, payload) -> None:
+        """A worker's outcome for task ``index``: its result, or an error (retried once)."""
+        if kind == "error":
+            self.failed(index, payload)
+            self.waiting.appendleft(index)
+            return
+        total_return, steps, penalty = payload
+        results = self.results
+        results.returns[index], results.steps[index], results.penalties[index] = total_return, steps, penalty
+        self.remaining -= 1
+        if self._progress is not None:
+            self._progress(1, steps)
+
+    def failed(self, index: int, message: str) -> None:
+        """The first failure of a task is reported and retried; the second stops the evaluation."""
+        self._failures[index] += 1
+        if self._failures[index] >= MAX_ATTEMPTS:
+            raise EvaluationError(self.tasks[index], self.env_ids, message)
+        self.results.retried.append(describe_failure(self.tasks[index], self.env_ids, "once", message)
+                                    + "; retried")
+
+
+class ChunkSizer:
+    """Tasks per hand-out, from the wall time per task of the last generation."""
+
+    def __init__(self, workers: int):
+        self.workers = workers
+        self._task_seconds: float | None = None  # None: no generation yet, so single episodes
+        self._started = 0.0
+
+    def size(self, n_tasks: int) -> int:
+        """About CHUNK_SECONDS of work, at most a quarter of a worker's fair share."""
+        self._started = time.perf_counter()
+        if self._task_seconds is None:
+            return 1
+        fair_share = max(1, n_tasks // (4 * self.workers))
+        return max(1, min(fair_share, math.ceil(CHUNK_SECONDS / max(self._task_seconds, 1e-6))))
+
+    def finished(self, n_tasks: int) -> None:
+        self._task_seconds = (time.perf_counter() - self._started) * self.workers / max(n_tasks, 1)

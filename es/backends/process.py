@@ -1,0 +1,201 @@
+"""The process-pool backend: persistent worker processes on this machine.
+
+Each worker builds its environments once, maps the shared noise table and a shared theta, and
+receives only task records, in chunks (``es.backends.base``). A worker that dies (segfault, out of
+memory) is replaced and the task it was running is retried once.
+"""
+
+from __future__ import annotations
+
+import collections
+import ctypes
+import multiprocessing as mp
+import signal
+import sys
+import time
+from multiprocessing import connection, shared_memory
+from typing import Callable
+
+import numpy as np
+
+from es.backends.base import ChunkSizer, Generation, Progress, Results, TaskBook, WorkerStartError
+from es.noise import NoiseTable, attach_shared
+from es.worker import Worker, pin_threads
+
+CLOSE_SECONDS = 2.0  # how long closing waits for workers to finish before ending them
+
+
+def _die_with_parent() -> None:
+    """Linux: have the kernel kill this worker if the run's process dies, even by SIGKILL."""
+    if sys.platform.startswith("linux"):
+        try:
+            ctypes.CDLL(None).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            pass
+
+
+def _worker_main(conn, build_problem, noise_name: str, noise_size: int, theta_name: str, dim: int) -> None:
+    _die_with_parent()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the runner's to handle
+    pin_threads()
+    try:
+        noise = NoiseTable.attach(noise_name, noise_size)
+        theta_memory = attach_shared(theta_name)
+        theta = np.ndarray((dim,), dtype=np.float32, buffer=theta_memory.buf)
+        worker = Worker(build_problem, noise, theta)
+    except Exception as error:
+        conn.send(("fatal", f"{type(error).__name__}: {error}"))
+        return
+    conn.send(("ready", None))
+    while True:
+        try:
+            message = conn.recv()
+        except (EOFError, OSError):  # the runner is gone
+            break
+        if message is None:
+            break
+        generation, sigma, chunk = message
+        for task in chunk:
+            conn.send(worker.run(generation, sigma, task))
+        conn.send(("done", None))
+    worker.close()
+
+
+def _context():
+    methods = mp.get_all_start_methods()
+    return mp.get_context("forkserver" if "forkserver" in methods else "spawn")
+
+
+class _Slot:
+    """One worker process and what it is working on."""
+
+    def __init__(self, process, conn):
+        self.process, self.conn = process, conn
+        self.chunk: collections.deque = collections.deque()  # task indices not yet reported
+
+
+class ProcessEvaluator:
+    def __init__(self, build_problem: Callable[[], object], noise: NoiseTable, dim: int,
+                 env_ids: tuple[str, ...], workers: int):
+        if noise.name is None:
+            raise ValueError("the process pool needs a noise table in shared memory")
+        self.env_ids, self.workers = env_ids, workers
+        self._args = (build_problem, noise.name, noise.size)
+        self._dim = dim
+        self._theta_memory = shared_memory.SharedMemory(create=True, size=max(dim, 1) * 4)
+        self._theta = np.ndarray((dim,), dtype=np.float32, buffer=self._theta_memory.buf)
+        pin_threads()  # here, before the workers (and the fork server) start and load their libraries
+        self._context = _context()
+        self._slots: list[_Slot] = []
+        self._chunks = ChunkSizer(workers)
+        try:
+            self._slots = [self._spawn() for _ in range(workers)]  # they start in parallel
+            for slot in self._slots:
+                self._await_ready(slot)
+        except BaseException:
+            self.close()
+            raise
+
+    def _spawn(self) -> _Slot:
+        parent, child = self._context.Pipe()
+        build_problem, noise_name, noise_size = self._args
+        process = self._context.Process(
+            target=_worker_main, daemon=True,
+            args=(child, build_problem, noise_name, noise_size, self._theta_memory.name, self._dim))
+        process.start()
+        child.close()
+        return _Slot(process, parent)
+
+    @staticmethod
+    def _await_ready(slot: _Slot) -> None:
+        try:
+            kind, payload = slot.conn.recv()
+        except EOFError:
+            slot.process.join(timeout=5)
+            kind, payload = "fatal", f"worker process exited while starting ({_describe_exit(slot.process)})"
+        if kind != "ready":
+            raise WorkerStartError(f"a worker could not start: {payload}")
+
+    def evaluate(self, generation: Generation, progress: Progress | None = None) -> Results:
+        self._theta[:] = generation.theta
+        tasks = generation.tasks
+        book = TaskBook(tasks, self.env_ids, progress)
+        size = self._chunks.size(len(tasks))
+        idle = list(self._slots)
+        busy: dict = {}  # connection or process sentinel -> slot
+        while book.remaining or busy:  # busy: wait for every "done", so no message is left over
+            while idle and book.waiting:
+                slot = idle.pop()
+                slot.chunk = collections.deque(book.next_chunk(size))
+                slot.conn.send((generation.number, generation.sigma, tasks[list(slot.chunk)]))
+                busy[slot.conn] = busy[slot.process.sentinel] = slot
+            for ready in connection.wait(list(busy)):
+                slot = busy.get(ready)
+                if slot is None:  # handled already through its other handle
+                    continue
+                if self._receive(slot, book, block=ready is slot.conn):
+                    del busy[slot.conn], busy[slot.process.sentinel]
+                    idle.append(slot if slot.process.is_alive() and not slot.chunk else self._replace(slot, book))
+        self._chunks.finished(len(tasks))
+        return book.results
+
+    def _receive(self, slot: _Slot, book: TaskBook, block: bool) -> bool:
+        """Read what ``slot`` sent; True once it is finished with its chunk (or dead)."""
+        try:
+            while block or slot.conn.poll():
+                block = False
+                kind, payload = slot.conn.recv()
+                if kind == "done":
+                    return True
+                book.record(slot.chunk.popleft(), kind, payload)
+        except (EOFError, OSError):
+            return True
+        return not slot.process.is_alive()
+
+    def _replace(self, slot: _Slot, book: TaskBook) -> _Slot:
+        """Start a fresh worker for a dead one; its unfinished tasks go back in the queue."""
+        slot.process.join(timeout=5)
+        slot.conn.close()
+        lost = list(slot.chunk)
+        book.put_back(lost)
+        fresh = self._spawn()
+        self._await_ready(fresh)
+        self._slots[self._slots.index(slot)] = fresh
+        if lost:  # the first unreported task is the one it was running
+            book.failed(lost[0], f"worker process died ({_describe_exit(slot.process)})")
+        return fresh
+
+    def close(self) -> None:
+        """Ask every worker to stop; after CLOSE_SECONDS in all, end the ones still busy (or stuck)."""
+        for slot in self._slots:
+            try:
+                slot.conn.send(None)
+            except (OSError, ValueError):
+                pass
+        deadline = time.monotonic() + CLOSE_SECONDS
+        for slot in self._slots:
+            slot.process.join(timeout=max(0.0, deadline - time.monotonic()))
+        for slot in self._slots:
+            if slot.process.is_alive():
+                slot.process.terminate()
+                slot.process.join(timeout=CLOSE_SECONDS)
+            if slot.process.is_alive():
+                slot.process.kill()
+                slot.process.join()
+            slot.conn.close()
+        self._slots = []
+        if self._theta_memory is not None:
+            self._theta = np.empty(0, dtype=np.float32)
+            self._theta_memory.close()
+            self._theta_memory.unlink()
+            self._theta_memory = None
+
+
+def _describe_exit(process) -> str:
+    code = process.exitcode
+    if code is not None and code < 0:
+        try:
+            return f"killed by {signal.Signals(-code).name}"
+        except ValueError:
+            return f"killed by signal {-code}"
+    return f"exit code {code}"

@@ -1,0 +1,213 @@
+"""The files of a run: where they live, their names, and the checkpoint.
+
+``<folder>/<time>_<env>_seed<seed>/`` holds the original project's files (``.dat`` parameter files
+named as upstream by the policy, ``Fitness_values_<run>_<env>.npy``), ``best``/``last`` copies of
+the parameters, ``config.json``, ``metrics.csv`` and ``checkpoint.npz``. Every write is atomic
+(``es.files``), and an OSError becomes a ``SaveError`` that names the file. The checkpoint is the
+fields of one dataclass, ``Checkpoint``, written and read by iterating over them.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import time
+import typing
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from es import files
+from es.strategy import ESState
+
+
+class SaveError(RuntimeError):
+    """A file of the run could not be written (disk full, folder made read-only); names the file."""
+
+
+class RunFolderError(ValueError):
+    """A run folder that cannot be used: not a run, an unreadable checkpoint or metrics file."""
+
+
+@dataclass
+class History:
+    """What a run has done so far, beyond the strategy state: saved in the checkpoint."""
+
+    best_theta: np.ndarray | None = None  # the centre with the best return so far
+    best_center: float = -math.inf
+    fitness_log: list[float] = field(default_factory=list)  # the original's Fitness_values file
+    metrics: list[dict] = field(default_factory=list)
+    total_steps: int = 0
+    total_seconds: float = 0.0
+
+
+@dataclass
+class Checkpoint:
+    """Everything a resume needs beyond config.json; one array per field in checkpoint.npz."""
+
+    theta: np.ndarray
+    lr: float
+    sigma: float
+    generation: int
+    best_theta: np.ndarray  # empty until a centre has scored
+    best_center: float
+    fitness_log: np.ndarray  # the original's Fitness_values file
+    total_steps: int
+    total_seconds: float
+
+    @classmethod
+    def of(cls, state: ESState, history: History) -> "Checkpoint":
+        best = history.best_theta if history.best_theta is not None else np.zeros(0, np.float32)
+        return cls(theta=state.theta, lr=state.lr, sigma=state.sigma, generation=state.generation,
+                   best_theta=best, best_center=history.best_center, fitness_log=np.array(history.fitness_log),
+                   total_steps=history.total_steps, total_seconds=history.total_seconds)
+
+    def state(self) -> ESState:
+        return ESState(self.theta.astype(np.float32), self.lr, self.sigma, self.generation)
+
+    def history(self, metrics: list[dict]) -> History:
+        return History(self.best_theta if self.best_theta.size else None, self.best_center,
+                       [float(value) for value in self.fitness_log], metrics, self.total_steps, self.total_seconds)
+
+    def to_bytes(self) -> bytes:
+        buffer = io.BytesIO()
+        np.savez(buffer, **{item.name: np.asarray(getattr(self, item.name)) for item in fields(self)})
+        return buffer.getvalue()
+
+    @classmethod
+    def from_file(cls, path: Path) -> "Checkpoint":
+        types = typing.get_type_hints(cls)
+        with np.load(path) as saved:
+            return cls(**{item.name: _decode(saved[item.name], types[item.name]) for item in fields(cls)})
+
+
+def _decode(array: np.ndarray, kind: type):
+    if kind is np.ndarray:
+        return np.array(array)
+    return kind(array)
+
+
+def named_file(prefix: str, role: str) -> str:
+    """``best.dat`` / ``last.dat`` for static weights, ``<prefix>_<role>.dat`` for Hebbian parts."""
+    return f"{prefix}.dat" if role == "weights" else f"{prefix}_{role}.dat"
+
+
+def fitness_file_name(run_id: str, env: str) -> str:
+    return f"Fitness_values_{run_id}_{env}.npy"
+
+
+@dataclass
+class RunFolder:
+    path: Path
+    checkpoint_generation: int | None = field(default=None)  # the generation checkpoint.npz holds
+
+    @classmethod
+    def create(cls, folder: str | Path, label: str, seed: int) -> "RunFolder":
+        """A fresh run folder ``<folder>/<time>_<env>_seed<seed>``; never an existing one."""
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        base = f"{time.strftime('%Y%m%d-%H%M%S')}_{label}_seed{seed}"
+        for attempt in range(1000):
+            path = folder / (base if attempt == 0 else f"{base}-{attempt + 1}")
+            try:
+                path.mkdir()
+                return cls(path)
+            except FileExistsError:
+                continue
+        raise RunFolderError(f"cannot create a new run folder in {folder}")
+
+    @classmethod
+    def existing(cls, path: str | Path) -> "RunFolder":
+        path = Path(path)
+        if not (path / "config.json").is_file() or not (path / "checkpoint.npz").is_file():
+            raise RunFolderError(f"--resume {path}: not a run folder (needs config.json and checkpoint.npz)")
+        return cls(path)
+
+    @property
+    def name(self) -> str:
+        return self.path.name
+
+    def write(self, write: Callable, name: str, *args) -> None:
+        """``write(path / name, *args)``; an OSError becomes a SaveError naming the file."""
+        target = self.path / name
+        try:
+            write(target, *args)
+        except OSError as error:
+            raise SaveError(f"cannot write {target}: {error.strerror or error}") from None
+
+    # --- parameters ---------------------------------------------------------------------------
+
+    def save_generation(self, policy, state: ESState, history: History, label: str, popsize: int) -> None:
+        """The original's files of the generation just done (named by the policy), best/last, the
+        fitness log; the checkpoint is written separately, last."""
+        reward = reward_label(float(history.metrics[-1]["fitness_mean"]) if history.metrics else math.nan)
+        arrays = policy.export(state.theta)
+        self.save_parameters({policy.file_name(role, label, reward, popsize, state.generation - 1): array
+                              for role, array in arrays.items()})
+        self.save_named("last", arrays)
+        if history.best_theta is not None:
+            self.save_named("best", policy.export(history.best_theta))
+        self.save_fitness_log(label, history.fitness_log)
+
+    def save_parameters(self, named_arrays: dict[str, np.ndarray]) -> None:
+        for name, array in named_arrays.items():
+            self.write(files.save_dat, name, array)
+
+    def save_named(self, prefix: str, arrays: dict[str, np.ndarray]) -> None:
+        """``best``/``last`` copies: one file per role of the policy's export."""
+        self.save_parameters({named_file(prefix, role): array for role, array in arrays.items()})
+
+    def named_path(self, prefix: str, role: str) -> Path:
+        return self.path / named_file(prefix, role)
+
+    def save_fitness_log(self, env_label: str, log: list[float]) -> None:
+        self.write(files.save_npy, fitness_file_name(self.name, env_label), np.array(log))
+
+    # --- config and metrics -------------------------------------------------------------------
+
+    def read_config(self) -> dict:
+        return files.read_json(self.path / "config.json")
+
+    def write_config(self, data: dict) -> None:
+        self.write(files.write_json, "config.json", data)
+
+    def write_metrics(self, rows: list[dict]) -> None:
+        self.write(files.write_metrics, "metrics.csv", rows)
+
+    def read_metrics(self, up_to_generation: int) -> list[dict]:
+        """The rows up to a generation; rows a kill left after the checkpoint are dropped."""
+        path = self.path / "metrics.csv"
+        try:
+            rows = files.read_metrics(path) if path.exists() else []
+            return [row for row in rows if int(row["generation"]) <= up_to_generation]
+        except (KeyError, ValueError, TypeError) as error:
+            raise RunFolderError(f"cannot resume: {path} is unreadable ({type(error).__name__}: {error})") from None
+
+    # --- checkpoint ---------------------------------------------------------------------------
+
+    def save_checkpoint(self, checkpoint: Checkpoint) -> None:
+        self.write(files.atomic_write_bytes, "checkpoint.npz", checkpoint.to_bytes())
+        self.checkpoint_generation = checkpoint.generation
+
+    def load_checkpoint(self) -> Checkpoint:
+        path = self.path / "checkpoint.npz"
+        try:
+            checkpoint = Checkpoint.from_file(path)
+        except Exception as error:  # truncated, corrupt, or not a checkpoint at all
+            raise RunFolderError(f"cannot resume from {path}: not a readable checkpoint "
+                                 f"({type(error).__name__}); its run cannot be continued") from None
+        self.checkpoint_generation = checkpoint.generation
+        self._remove_stale_temporaries()
+        return checkpoint
+
+    def _remove_stale_temporaries(self) -> None:
+        """Delete the temporary files of saves that a kill cut short (``es.files``: ``.<name>.*.tmp``)."""
+        for path in self.path.glob(".*.tmp"):
+            path.unlink(missing_ok=True)
+
+
+def reward_label(mean_fitness: float) -> int:
+    """The ``rew_`` part of the original file names: int of the mean fitness (0 if not finite)."""
+    return int(mean_fitness) if math.isfinite(mean_fitness) else 0

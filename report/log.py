@@ -1,0 +1,49 @@
+"""What a training run shows and draws as it goes: its one line per generation, and ``fitness.png``.
+
+Both are reporters of the generation loop (``es.loop.Reporter``): they receive each generation's
+metrics row and each save, and the loop itself never prints.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+from report.plots import save_run_plot
+
+
+def generation_line(row: dict) -> str:
+    """The original's line (iter, reward, update_factor, lr, sum and sum of |.| of the penalised
+    parameters: weights or Hebbian coefficients), then the centre's return, env steps and seconds."""
+    name = row["parameters_name"]
+    line = (f"iter {row['generation']} | reward: {row['fitness_mean']:.3f} | "
+            f"update_factor: {row['update_factor']:.6f} | lr: {row['lr']:.6f} | "
+            f"sum_{name}: {row['parameters_sum']:.3f} | sum_abs_{name}: {row['parameters_abs_sum']:.3f} | "
+            f"center: {row['center_return']:.2f} | steps: {row['env_steps']} | {row['seconds']:.1f}s")
+    if row["nonfinite"]:
+        line += f" | {row['nonfinite']} non-finite returns ranked last"
+    if row["skipped"]:
+        line += " | step skipped: all fitness values equal"
+    return line
+
+
+class GenerationLog:
+    """Prints one line per generation."""
+
+    def __init__(self, log: Callable[[str], None] = print):
+        self.log = log
+
+    def generation(self, row: dict) -> None:
+        self.log(generation_line(row))
+
+    def saved(self, folder, rows: list[dict]) -> None:
+        pass
+
+
+class FitnessPlot:
+    """Redraws the run's ``fitness.png`` at every save."""
+
+    def generation(self, row: dict) -> None:
+        pass
+
+    def saved(self, folder, rows: list[dict]) -> None:
+        folder.write(save_run_plot, "fitness.png", rows, folder.name)
