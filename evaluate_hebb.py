@@ -31,8 +31,12 @@ def load_arrays(args) -> dict:
     return arrays
 
 
+def input_paths(args) -> list[str]:
+    return [path for path in (args.path_hebb, args.path_coev) if path is not None]
+
+
 def main(argv=None) -> int:
-    return evaluate_main("hebbian", build_parser(), argv, load_arrays)
+    return evaluate_main("hebbian", build_parser(), argv, load_arrays, input_paths)
 
 
 if __name__ == "__main__":

@@ -22,8 +22,12 @@ def load_arrays(args) -> dict:
     return {"weights": load_dat(args.path_weights)}
 
 
+def input_paths(args) -> list[str]:
+    return [args.path_weights]
+
+
 def main(argv=None) -> int:
-    return evaluate_main("static", build_parser(), argv, load_arrays)
+    return evaluate_main("static", build_parser(), argv, load_arrays, input_paths)
 
 
 if __name__ == "__main__":

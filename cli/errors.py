@@ -9,8 +9,11 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import os
+import sys
 
 import envs
+from envs.headless import explain_gl_failure
 from es.backends import BackendUnavailable
 from es.files import FileFormatError
 from es.runfolder import RunFolderError
@@ -24,7 +27,12 @@ USER_ERRORS = (UserError, FileFormatError, RunFolderError, BackendUnavailable, e
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse whose errors are one line and exit code 2."""
+    """argparse whose errors are one line and exit code 2, and which takes no abbreviations: a
+    ``--gen 4`` read as ``--generations`` would be silently ignored on resume."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str):
         self.exit(2, f"{self.prog}: error: {message}\n")
@@ -42,4 +50,16 @@ def explained(what: str):
     except ValueError as error:
         raise UserError(str(error)) from None
     except Exception as error:
-        raise UserError(f"{what}: {type(error).__name__}: {error}") from None
+        reason = explain_gl_failure(error)  # MuJoCo under a MUJOCO_GL whose library does not load
+        raise UserError(str(reason) if reason is not None else f"{what}: {type(error).__name__}: {error}") from None
+
+
+def say(line: str) -> None:
+    """Print a line of output. If whoever reads it has gone (``| head``), the rest of the output is
+    discarded and the work goes on: a run is not lost because its reader stopped reading."""
+    try:
+        print(line, flush=True)
+    except BrokenPipeError:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # also what the interpreter flushes at exit
+        os.close(devnull)

@@ -12,11 +12,13 @@ import os
 import sys
 from pathlib import Path
 
-from cli.errors import USER_ERRORS, Parser, UserError, explained
-from cli.flags import flag_value, positive_int
+from cli.errors import USER_ERRORS, Parser, UserError, explained, say
+from cli.flags import SEED_RANGE, flag_value, positive_int, seed_value
 from cli.train import resolve_environments
 from envs import ProblemSpec
+from envs.headless import RenderingUnavailable, check_can_render, choose_mujoco_gl
 from policies import PolicySettings
+from report.video import check_video_path
 
 
 def evaluation_parser(prog: str, description: str) -> Parser:
@@ -26,10 +28,11 @@ def evaluation_parser(prog: str, description: str) -> Parser:
     add("--environment", default="CarRacing-v0", metavar="ID",
         help="environment id; several ids separated by commas give one row each")
     add("--episodes", type=positive_int, default=1, metavar="N", help="episodes per environment")
-    add("--seed", type=int, default=0, help="seed of the first episode; episode i uses seed + i")
+    add("--seed", type=seed_value, default=0, help="seed of the first episode; episode i uses seed + i")
     add("--render", type=flag_value, nargs="?", const=True, default=False, metavar="BOOL",
         help="show the episodes in a window (needs a display)")
-    add("--video", default=None, metavar="PATH", help="write the first episode to this mp4 file")
+    add("--video", default=None, metavar="PATH",
+        help="write the first episode to this video file (.mp4, .mkv, .mov or .avi), frame by frame")
     add("--json", default=None, metavar="PATH",
         help="also write the statistics (per environment: returns, mean, std, steps, seeds; for ants "
              "the distances and forward displacements walked) to this JSON file")
@@ -39,85 +42,134 @@ def evaluation_parser(prog: str, description: str) -> Parser:
     return parser
 
 
-def check_output_file(path: str | None, flag: str) -> None:
-    """Refuse, before any episode runs, an output file that could not be written."""
-    if path is None:
-        return
-    target = Path(path)
-    if target.exists() and not target.is_file():
-        raise UserError(f"{flag} {path}: exists and is not a regular file (a folder or a device); give a file name")
-    parent = target.parent
-    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
-        raise UserError(f"{flag} {path}: {parent} is not an existing writable folder")
+def check_outputs(args: argparse.Namespace, inputs: list[str]) -> None:
+    """Refuse, before any episode runs, outputs that could not be written or that would replace an
+    input (the weight files) or each other."""
+    outputs = [(flag, path) for flag, path in (("--json", args.json), ("--plot", args.plot), ("--video", args.video))
+               if path is not None]
+    for flag, path in outputs:
+        target = Path(path)
+        if target.exists() and not target.is_file():
+            raise UserError(f"{flag} {path}: exists and is not a regular file (a folder or a device); give a file name")
+        parent = target.parent
+        if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+            raise UserError(f"{flag} {path}: {parent} is not an existing writable folder")
+        for other in inputs:
+            if same_file(path, other):
+                raise UserError(f"{flag} {path} is the weight file {other}; writing it would destroy the input: "
+                                "give another file name")
+    for index, (flag, path) in enumerate(outputs):
+        for other_flag, other in outputs[index + 1:]:
+            if same_file(path, other):
+                raise UserError(f"{flag} and {other_flag} are the same file {path}; give each its own name")
+    if args.video is not None and (problem := check_video_path(args.video)) is not None:
+        raise UserError(f"--video {args.video}: {problem}")
 
 
-def write_evaluation_outputs(args: argparse.Namespace, command: list[str], kind: str, reports, problem,
-                             params) -> None:
-    """The table, then the --json, --plot and --video files the user asked for."""
-    from envs.evaluation import format_table, trace_episode
+def same_file(first: str | Path, second: str | Path) -> bool:
+    """The same file once links are resolved (or the same path for files not there yet)."""
+    first, second = Path(first), Path(second)
+    if first.exists() and second.exists():
+        return os.path.samefile(first, second)
+    return first.resolve() == second.resolve()
+
+
+def write_outputs(args: argparse.Namespace, command: list[str], kind: str, reports, problem, params) -> None:
+    """The --json and --plot files the user asked for (the video is written during its episode)."""
+    from envs.evaluation import trace_episode
     from es.files import write_json
     from report.adaptation import plot_adaptation
-    from report.video import write_video
 
-    print(format_table(reports), flush=True)
     if args.json:
         write_json(Path(args.json), {"kind": kind, "command": command, "episodes": args.episodes, "seed": args.seed,
                                      "distance": "ants only: metres between the torso's (x, y) at the start "
                                                  "and the end of the policy steps; forward: its x component",
                                      "environments": [report.to_dict() for report in reports]})
-        print(f"statistics: {args.json}")
+        say(f"statistics: {args.json}")
     if args.plot:
         trace = trace_episode(problem, params, args.seed)
         plot_adaptation(trace, args.plot)
-        print(f"adaptation plot ({trace.env_id}, seed {args.seed}, {len(trace.rewards)} steps): {args.plot}")
-    if args.video:
-        fps = int(problem.envs[0].metadata.get("render_fps") or 30)
-        write_video(args.video, problem.envs[0].frames, fps)
-        print(f"video of the first episode: {args.video}")
+        say(f"adaptation plot ({trace.env_id}, seed {args.seed}, {len(trace.rewards)} steps): {args.plot}")
 
 
-def evaluate_main(kind: str, parser: Parser, argv: list[str] | None, load_arrays) -> int:
-    """Shared body of the evaluate scripts; ``load_arrays(args)`` reads the weight files."""
-    from envs.evaluation import evaluate
+def show(report) -> None:
+    """One line per episode, as it ends."""
+    distance = (f" | distance {report.distances[-1]:.2f} m, forward {report.forward[-1]:.2f} m"
+                if report.distances else "")
+    say(f"{report.env_id} | episode {len(report.returns)} | seed {report.seeds[-1]} | return "
+          f"{report.returns[-1]:.2f} | steps {report.steps[-1]}{distance}")
+
+
+def build_problem(spec: ProblemSpec, render_mode: str | None):
+    """The environments and policy; rendering needs a GL backend that loads (``envs.headless``)."""
+    if render_mode is not None:
+        choose_mujoco_gl()
+    with explained("cannot make the environments"):
+        problem = spec.build(render_mode)
+    try:
+        check_can_render(problem.envs, render_mode)
+    except RenderingUnavailable:
+        problem.close()
+        raise
+    return problem
+
+
+def evaluate_main(kind: str, parser: Parser, argv: list[str] | None, load_arrays, input_paths) -> int:
+    """Shared body of the evaluate scripts; ``load_arrays(args)`` reads the weight files, whose paths
+    ``input_paths(args)`` lists."""
+    from envs.evaluation import EpisodeError, evaluate, format_table
     from report.video import record_first_episode
 
     argv = sys.argv[1:] if argv is None else argv
     args = parser.parse_args(argv)
-    problem = None
+    problem = recorder = None
+    done: dict[str, object] = {}  # env id -> its report so far
+
+    def finished_episode(report) -> None:
+        done[report.env_id] = report
+        show(report)
+
     try:
         env_ids = resolve_environments(args.environment)
-        for path, flag in ((args.json, "--json"), (args.plot, "--plot"), (args.video, "--video")):
-            check_output_file(path, flag)
+        check_outputs(args, input_paths(args))
+        if args.seed + args.episodes - 1 > SEED_RANGE[1]:
+            raise UserError(f"--seed {args.seed} with --episodes {args.episodes} runs past the largest episode seed "
+                            f"{SEED_RANGE[1]}")
         if args.render and args.video:
             raise UserError("--video records frames off screen; it cannot be combined with --render")
         arrays = load_arrays(args)
-        spec = ProblemSpec(env_ids, PolicySettings(kind, **{name: getattr(args, name) for name in
-                                                            ("hebb_rule", "init_weights") if hasattr(args, name)}))
         render_mode = "human" if args.render else ("rgb_array" if args.video else None)
-        with explained("cannot make the environments"):
-            problem = spec.build(render_mode)
+        policy = PolicySettings(kind, **{name: getattr(args, name) for name in ("hebb_rule", "init_weights")
+                                         if hasattr(args, name)})
+        problem = build_problem(ProblemSpec(env_ids, policy), render_mode)
         with explained("cannot load the weights"):
             params = problem.policy.load(arrays)
         if args.video:
-            record_first_episode(problem)
-
-        def show(report):
-            distance = (f" | distance {report.distances[-1]:.2f} m, forward {report.forward[-1]:.2f} m"
-                        if report.distances else "")
-            print(f"{report.env_id} | episode {len(report.returns)} | seed {report.seeds[-1]} | return "
-                  f"{report.returns[-1]:.2f} | steps {report.steps[-1]}{distance}", flush=True)
-
-        reports = evaluate(problem, params, args.episodes, args.seed, on_episode=show)
+            recorder = record_first_episode(problem, args.video)
+        reports = evaluate(problem, params, args.episodes, args.seed, on_episode=finished_episode)
+        if recorder is not None:
+            recorder.finish()
+            if recorder.frames_written == 0:
+                raise UserError(f"--video {args.video}: the environment rendered no frames")
+            say(f"video of the first episode: {args.video}")
+        say(format_table(reports))
         try:
-            write_evaluation_outputs(args, [parser.prog, *argv], kind, reports, problem, params)
-        except (OSError, ValueError) as error:  # a full disk, an environment that renders no frames
+            write_outputs(args, [parser.prog, *argv], kind, reports, problem, params)
+        except (OSError, ValueError) as error:  # a full disk
             raise UserError(f"{type(error).__name__}: {error}") from None
         return 0
-    except USER_ERRORS as error:
+    except (*USER_ERRORS, RenderingUnavailable) as error:
         print(f"{parser.prog}: error: {error}", file=sys.stderr)
         return 2
+    except EpisodeError as error:
+        print(f"{parser.prog}: error: {error}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
+        if done:
+            say(f"\ninterrupted; the episodes done:\n{format_table(list(done.values()))}")
         return 130
     finally:
+        if recorder is not None:
+            recorder.finish()
         if problem is not None:
             problem.close()

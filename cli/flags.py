@@ -6,6 +6,8 @@ import argparse
 
 import numpy as np
 
+from cli.errors import say
+
 
 def positive_int(text: str) -> int:
     value = int(text)
@@ -21,11 +23,39 @@ def positive_float(text: str) -> float:
     return value
 
 
+SEED_RANGE = (0, 2**31 - 1)
+
+
 def threads_value(text: str) -> int:
+    """-1: all cores; N >= 1 workers. The original ran 0 and -2 (any value <= 1 but -1) serially,
+    so its command lines keep working: they mean 1, with a notice."""
     value = int(text)
     if value == 0 or value < -1:
-        raise argparse.ArgumentTypeError(f"must be -1 (all cores) or a number of workers >= 1, got {text}")
+        say(f"note: --threads {value} runs everything in this process, as the original did; that is --threads 1")
+        return 1
     return value
+
+
+def fraction(text: str) -> float:
+    """A number in (0, 1]."""
+    value = float(text)
+    if not 0 < value <= 1:
+        raise argparse.ArgumentTypeError(f"must be a number in (0, 1], got {text}")
+    return value
+
+
+def seed_value(text: str) -> int:
+    value = int(text)
+    low, high = SEED_RANGE
+    if not low <= value <= high:
+        raise argparse.ArgumentTypeError(f"must be a whole number from {low} to {high}, got {text}")
+    return value
+
+
+def non_empty(text: str) -> str:
+    if not text.strip():
+        raise argparse.ArgumentTypeError("is empty; give a path")
+    return text
 
 
 def flag_value(text: str | None) -> bool:

@@ -1,11 +1,20 @@
-"""The commands the scripts print for the user to run next: resume a run, evaluate its parameters."""
+"""The commands the scripts print for the user to run next: resume a run, evaluate its parameters.
+
+A printed command must work when pasted into the same shell: it names the interpreter that is
+running (``sys.executable``, so it works outside an activated virtual environment too) and the
+script by a path that resolves from the current folder, and every word is shell-quoted (a
+``--folder "my runs"`` stays one word).
+"""
 
 from __future__ import annotations
 
+import shlex
+import sys
 from pathlib import Path
 
 from cli.config import TrainConfig
 
+ROOT = Path(__file__).resolve().parent.parent
 TRAIN_SCRIPTS = {"static": "train_static.py", "hebbian": "train_hebb.py"}
 # role of a policy's exported array -> (evaluate script, its flag)
 EVALUATE_FLAGS = {"weights": ("evaluate_static.py", "--path_weights"), "coeffs": ("evaluate_hebb.py", "--path_hebb"),
@@ -13,15 +22,29 @@ EVALUATE_FLAGS = {"weights": ("evaluate_static.py", "--path_weights"), "coeffs":
                   "coevolved_initial_weights": ("evaluate_hebb.py", "--path_coev")}
 
 
+def script_path(name: str) -> str:
+    """The project's script ``name``, relative to the current folder if it lies below it."""
+    path = ROOT / name
+    try:
+        return str(path.relative_to(Path.cwd()))
+    except ValueError:
+        return str(path)
+
+
+def command(script: str, *words: object) -> str:
+    return shlex.join([sys.executable or "python", script_path(script),
+                       *map(str, words)])
+
+
 def resume_hint(config: TrainConfig, run_dir: Path) -> str:
-    return f"python {TRAIN_SCRIPTS[config.policy.kind]} --resume {run_dir}"
+    return command(TRAIN_SCRIPTS[config.policy.kind], "--resume", run_dir)
 
 
 def evaluate_hint(config: TrainConfig, paths: dict[str, Path]) -> str:
     """The command that evaluates the parameter files ``paths`` (role -> file) over 10 episodes."""
-    script = EVALUATE_FLAGS[next(iter(paths))][0]
-    words = [f"python {script} --environment {config.env.environment}"]
+    words: list[object] = ["--environment", config.env.environment]
     if config.policy.kind == "hebbian":
-        words.append(f"--hebb_rule {config.policy.hebb_rule} --init_weights {config.policy.init_weights}")
-    words += [f"{EVALUATE_FLAGS[role][1]} {path}" for role, path in paths.items()]
-    return " ".join(words + ["--episodes 10"])
+        words += ["--hebb_rule", config.policy.hebb_rule, "--init_weights", config.policy.init_weights]
+    for role, path in paths.items():
+        words += [EVALUATE_FLAGS[role][1], path]
+    return command(EVALUATE_FLAGS[next(iter(paths))][0], *words, "--episodes", 10)

@@ -16,12 +16,12 @@ from pathlib import Path
 
 import envs
 from cli.config import SECTIONS, TrainConfig, field_names, read_toml
-from cli.errors import USER_ERRORS, Parser, UserError, explained
-from cli.flags import positive_float, positive_int, threads_value
+from cli.errors import USER_ERRORS, Parser, UserError, explained, say
+from cli.flags import fraction, non_empty, positive_float, positive_int, seed_value, threads_value
 from cli.hints import TRAIN_SCRIPTS, evaluate_hint, resume_hint
 from envs import EnvSettings, ProblemSpec
 from es.backends import BACKENDS
-from es.loop import Status, Trainer
+from es.loop import NonFiniteUpdate, Status, Trainer
 from es.runfolder import RunFolder, SaveError
 from es.settings import RESUMABLE, ESSettings, RunSettings
 from policies import PolicySettings
@@ -40,18 +40,19 @@ def training_parser(prog: str, description: str, folder: str) -> Parser:
     add("--popsize", type=int, default=200, metavar="N", help="population size (even: mirrored pairs)")
     add("--print_every", type=positive_int, default=1, metavar="K", help="save files every K generations")
     add("--lr", type=positive_float, default=0.2, help="ES learning rate")
-    add("--decay", type=positive_float, default=0.995, help="learning-rate decay per generation")
+    add("--decay", type=fraction, default=0.995, help="learning-rate decay per generation, in (0, 1]")
     add("--sigma", type=positive_float, default=0.1, help="initial noise standard deviation")
     add("--generations", type=positive_int, default=300, metavar="G",
         help="number of generations (with --resume: the total, counting those already run)")
-    add("--folder", default=folder, metavar="DIR", help="where run folders are created")
+    add("--folder", type=non_empty, default=folder, metavar="DIR", help="where run folders are created")
     add("--threads", type=threads_value, default=-1, metavar="W",
-        help="worker processes; -1 = all cores, 1 = run in this process")
-    add("--seed", type=int, default=None, help="seed of the run (default: a random one, printed and saved)")
+        help="worker processes; -1 = all cores, 1 = run in this process (0 and other negative values too, as "
+             "the original)")
+    add("--seed", type=seed_value, default=None, help="seed of the run (default: a random one, printed and saved)")
     add("--episodes", type=positive_int, default=1, metavar="E",
         help="episodes per fitness evaluation (the fitness is their mean)")
-    add("--resume", default=None, metavar="RUN_DIR", help="continue the run saved in RUN_DIR")
-    add("--config", default=None, metavar="FILE",
+    add("--resume", type=non_empty, default=None, metavar="RUN_DIR", help="continue the run saved in RUN_DIR")
+    add("--config", type=non_empty, default=None, metavar="FILE",
         help="an experiment file (TOML, as experiments/paper/*.toml) giving the settings; flags given too "
              "override it")
     add("--backend", choices=BACKENDS, default="process",
@@ -79,9 +80,24 @@ def population_size(requested: int) -> int:
     if requested < 2:
         raise UserError(f"--popsize must be at least 2 (one mirrored pair), got {requested}")
     if requested % 2:
-        print(f"note: --popsize {requested} is odd; mirrored sampling needs pairs, using {requested + 1}")
+        say(f"note: --popsize {requested} is odd; mirrored sampling needs pairs, using {requested + 1}")
         return requested + 1
     return requested
+
+
+TASK_BYTES = 160  # memory per episode of a generation: its task record, result, queue entry and shaping
+
+
+def check_population_fits(es: ESSettings, n_envs: int) -> None:
+    """Refuse, before anything is written, a population whose generation could not be held in memory."""
+    memory = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    per_member = TASK_BYTES * n_envs * es.episodes
+    needed = (es.popsize + 1) * per_member
+    if needed > memory // 2:
+        largest = max(2, (memory // 2 // per_member - 1) // 2 * 2)
+        raise UserError(f"--popsize {es.popsize} needs about {needed / 2**30:.1f} GiB for one generation's "
+                        f"{(es.popsize + 1) * n_envs * es.episodes} episodes, more than half of this machine's "
+                        f"{memory / 2**30:.1f} GiB; give --popsize {largest} or less")
 
 
 def config_from_args(kind: str, args: argparse.Namespace, argv: list[str]) -> TrainConfig:
@@ -94,12 +110,12 @@ def config_from_args(kind: str, args: argparse.Namespace, argv: list[str]) -> Tr
     if values["ray_address"] is not None and values["backend"] != "ray":
         raise UserError(f"--ray_address {values['ray_address']} needs --backend ray")
     seed = values["seed"] if values["seed"] is not None else secrets.randbelow(2**31)
+    es = ESSettings(**{**pick(ESSettings, values), "popsize": population_size(values["popsize"])})
     env = EnvSettings(values["environment"], resolve_environments(values["environment"]),
                       envs.custom_recipe_modules())
-    return TrainConfig(
-        es=ESSettings(**{**pick(ESSettings, values), "popsize": population_size(values["popsize"])}),
-        policy=PolicySettings(**{**pick(PolicySettings, values), "kind": kind}),
-        env=env, run=RunSettings(**{**pick(RunSettings, values), "seed": seed}))
+    check_population_fits(es, len(env.env_ids))
+    return TrainConfig(es=es, policy=PolicySettings(**{**pick(PolicySettings, values), "kind": kind}), env=env,
+                       run=RunSettings(**{**pick(RunSettings, values), "seed": seed}))
 
 
 def experiment_values(path: str, kind: str) -> dict:
@@ -133,8 +149,25 @@ def config_for_resume(kind: str, args: argparse.Namespace, argv: list[str]) -> t
     if config.policy.kind != kind:
         raise UserError(f"--resume {folder.path}: this is a {config.policy.kind} run; resume it with "
                         f"{TRAIN_SCRIPTS[config.policy.kind]}")
-    changed = {name: getattr(args, name) for name in RESUMABLE if name in given_flags(argv)}
-    return config.with_values(**changed), folder
+    given = given_flags(argv)
+    check_resume_flags(config, args, given)
+    return config.with_values(**{name: getattr(args, name) for name in RESUMABLE if name in given}), folder
+
+
+def check_resume_flags(config: TrainConfig, args: argparse.Namespace, given: set[str]) -> None:
+    """A flag that defines the run, given again on resume, must say what the run already uses."""
+    if "config" in given:
+        raise UserError("--config cannot be combined with --resume: the run's settings are in its config.json")
+    differing = []
+    for name in sorted(given - set(RESUMABLE) - {"resume"}):
+        value, stored = getattr(args, name), config.value(name)
+        if name == "popsize":
+            value = value + value % 2  # as a new run would round it
+        if value != stored:
+            differing.append(f"--{name} {value} (the run has {stored})")
+    if differing:
+        raise UserError(f"--resume {args.resume}: {', '.join(differing)}; a resumed run keeps its settings (only "
+                        f"{', '.join('--' + name for name in RESUMABLE)} may change): start a new run instead")
 
 
 def check_writable(folder: str) -> None:
@@ -201,7 +234,7 @@ def train_main(kind: str, parser: Parser, argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     trainer = None
     try:
-        if args.resume:
+        if args.resume is not None:
             config, folder = config_for_resume(kind, args, argv)
         else:
             config, folder = config_from_args(kind, args, argv), None
@@ -250,10 +283,13 @@ def report_end(trainer: Trainer, config: TrainConfig, status: Status) -> None:
             f"{resume_hint(config, folder.path)}")
     elif folder.checkpoint_generation is None:
         log("stopped; no checkpoint could be written")
+    elif isinstance(trainer.failure, NonFiniteUpdate):  # resuming would take the same step again
+        log(f"stopped; the checkpoint holds generation {folder.checkpoint_generation}; start a new run with a "
+            "lower --lr or a larger --sigma")
     else:
         log(f"stopped; the checkpoint holds generation {folder.checkpoint_generation}; "
             f"resume with: {resume_hint(config, folder.path)}")
 
 
 def log(line: str) -> None:
-    print(line, flush=True)
+    say(line)

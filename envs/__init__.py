@@ -1,14 +1,14 @@
 """Environments: construction, per-family recipes, wrappers, damaged morphologies, the rollout.
 
-Importing this package sets headless defaults (no display is ever needed) unless the user set
-them, and registers the pyBullet environments with Gymnasium.
+Importing this package lets pygame run without a display (unless the user chose a video driver),
+and registers the pyBullet environments and the damaged ants with Gymnasium. MuJoCo's GL backend is
+left alone: training never renders, and ``envs.headless`` chooses one when frames are asked for.
 """
 
 import os
 
 if not os.environ.get("DISPLAY"):
     os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
-    os.environ.setdefault("MUJOCO_GL", "egl")
 
 import gymnasium as gym  # noqa: E402
 

@@ -134,6 +134,10 @@ class EnvReport:
         return entry
 
 
+class EpisodeError(RuntimeError):
+    """An episode of the evaluation raised; names the environment and the episode's seed."""
+
+
 def evaluate(problem: Problem, params: np.ndarray, episodes: int, seed: int,
              on_episode: Callable[[EnvReport], None] | None = None) -> list[EnvReport]:
     """``episodes`` episodes per environment; ``on_episode(report)`` after each (progress)."""
@@ -143,7 +147,11 @@ def evaluate(problem: Problem, params: np.ndarray, episodes: int, seed: int,
         tracker = track_torso(problem.envs[env_index])
         env = tracker or problem.envs[env_index]
         for episode in range(episodes):
-            result = rollout(env, problem.policy, params, seed + episode)
+            try:
+                result = rollout(env, problem.policy, params, seed + episode)
+            except Exception as error:  # the environment (or a custom one's code) failed
+                raise EpisodeError(f"{env_id} failed in the episode with seed {seed + episode}: "
+                                   f"{type(error).__name__}: {error}") from error
             report.returns.append(result.total_return)
             report.steps.append(result.steps)
             report.seeds.append(seed + episode)

@@ -59,7 +59,8 @@ def resolve_env_id(env_id: str, notify=print) -> str:
         return prefix + newest.id
     known = [spec_id for spec_id, spec in registry.items() if _usable(spec)]
     close = difflib.get_close_matches(env_id, known, n=5, cutoff=0.5)
-    hint = f"; did you mean {', '.join(close)}?" if close else "; see gymnasium.pprint_registry()"
+    hint = (f"; did you mean {', '.join(close)}?" if close else
+            "; list them with: python -c 'import envs, gymnasium; gymnasium.pprint_registry()'")
     raise EnvironmentError_(f"unknown environment {env_id!r}{hint}")
 
 

@@ -13,7 +13,9 @@ import io
 import json
 import os
 import re
+import shutil
 import tempfile
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -61,11 +63,28 @@ def atomic_write_text(path: Path, text: str) -> None:
 
 
 def save_dat(path: Path, array: np.ndarray) -> None:
+    """``torch.save`` of a float32 array, atomically, named inside as ``torch.save(path)`` names it.
+
+    torch's zip archive has one top-level folder, the file's stem (``<stem>/data.pkl``), where
+    saving to a buffer would name it ``archive/``; readers of the original files open
+    ``<stem>/data.pkl``. So the file is written under its own name in a temporary folder beside
+    the target, synced, then renamed over it.
+    """
     import torch
 
-    buffer = io.BytesIO()
-    torch.save(np.asarray(array, dtype=np.float32), buffer)
-    atomic_write_bytes(path, buffer.getvalue())
+    path = Path(path)
+    if path.exists() and not path.is_file():  # never rename over a folder, a device or a pipe
+        raise OSError(f"{path} exists and is not a regular file")
+    staging = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"))
+    try:
+        staged = staging / path.name
+        torch.save(np.asarray(array, dtype=np.float32), staged)
+        os.chmod(staged, _FILE_MODE)
+        with open(staged, "rb") as handle:
+            os.fsync(handle.fileno())
+        os.replace(staged, path)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
 
 
 def _numpy_safe_globals() -> list:
@@ -94,13 +113,33 @@ def _refusal_reason(error: Exception) -> str:
     return lines[0] if lines else type(error).__name__
 
 
+def _check_weight_file(path: Path) -> None:
+    """Refuse what cannot be a weight file, naming why, before torch is imported."""
+    name = repr(str(path))
+    if not path.exists():
+        raise FileFormatError(f"weight file {name} does not exist")
+    if path.is_dir():
+        raise FileFormatError(f"weight file {name} is a folder; give the .dat file in it")
+    if not path.is_file():
+        raise FileFormatError(f"weight file {name} is not a regular file (a device or a pipe); give a .dat file")
+    with open(path, "rb") as handle:
+        head = handle.read(2)
+    if not head:
+        raise FileFormatError(f"weight file {name} is empty")
+    if head == b"PK":  # torch's zip format: the central directory is at the end, so a cut file loses it
+        if not zipfile.is_zipfile(path):
+            raise FileFormatError(f"weight file {name} is truncated or corrupt (an incomplete zip archive)")
+    elif head[:1] != b"\x80":  # nor torch's legacy format, a pickle
+        raise FileFormatError(f"{name} is not a weight file: it was not written by torch.save (it starts with "
+                              f"{head!r}; a .dat file is a numpy array saved with torch.save)")
+
+
 def load_dat(path: str | Path) -> np.ndarray:
-    """A ``.dat`` weight file as a float32 array (tensors are accepted too)."""
+    """A ``.dat`` weight file as a finite float32 array (tensors are accepted too, bfloat16 included)."""
     import pickle
 
     path = Path(path)
-    if not path.is_file():  # before importing torch: a typo should fail at once
-        raise FileFormatError(f"weight file {str(path)!r} does not exist")
+    _check_weight_file(path)
     import torch
 
     try:
@@ -111,13 +150,20 @@ def load_dat(path: str | Path) -> np.ndarray:
         raise FileFormatError(f"refused to load {str(path)!r}: not a plain weight array ({reason}); "
                               "only numpy arrays or tensors saved with torch.save are accepted") from None
     except Exception as error:
-        raise FileFormatError(f"cannot read weight file {str(path)!r}: {type(error).__name__}: "
-                              f"{str(error).splitlines()[0] if str(error) else ''}") from None
+        detail = str(error).split(". ")[0].splitlines()[0] if str(error) else ""
+        raise FileFormatError(f"weight file {str(path)!r} is truncated or corrupt ({type(error).__name__}: "
+                              f"{detail})") from None
     if isinstance(loaded, torch.Tensor):
-        loaded = loaded.detach().cpu().numpy()
+        tensor = loaded.detach().cpu()
+        loaded = (tensor.float() if tensor.is_floating_point() else tensor).numpy()  # numpy has no bfloat16
     if not isinstance(loaded, np.ndarray) or not np.issubdtype(loaded.dtype, np.number):
         raise FileFormatError(f"{str(path)!r} holds a {type(loaded).__name__}, not a numeric array")
-    return loaded.astype(np.float32)
+    array = loaded.astype(np.float32)
+    bad = int(np.size(array) - np.count_nonzero(np.isfinite(array)))
+    if bad:
+        raise FileFormatError(f"{str(path)!r} holds {bad} NaN or infinite values; a weight file must hold finite "
+                              "numbers")
+    return array
 
 
 def save_npy(path: Path, array: np.ndarray) -> None:

@@ -31,6 +31,10 @@ from es.worker import make_tasks
 SEED_LIMIT = 2**31 - 1
 
 
+class NonFiniteUpdate(RuntimeError):
+    """A step that would make theta NaN or infinite (an lr too large, a sigma too small)."""
+
+
 class Status(enum.Enum):
     DONE = "done"
     INTERRUPTED = "interrupted"  # by Ctrl-C or SIGTERM, after a save
@@ -59,6 +63,7 @@ class Trainer:
         self.strategy = OpenES(es)
         self.state = self.strategy.initial_state(policy.initial_params(np.random.default_rng([run.seed, 1])))
         self.history = History()
+        self.failure: Exception | None = None  # what stopped the run, if something did
 
     @classmethod
     def start(cls, es: ESSettings, run: RunSettings, problem, build_problem: Callable[[], object],
@@ -85,7 +90,7 @@ class Trainer:
                         self.save()
                     if interrupts.requested:
                         return Status.INTERRUPTED
-            except (EvaluationError, WorkerStartError, SaveError) as error:
+            except (EvaluationError, WorkerStartError, SaveError, NonFiniteUpdate) as error:
                 return self._stop(error)
         return Status.DONE
 
@@ -102,7 +107,12 @@ class Trainer:
         returns = results.returns.reshape(popsize + 1, -1).mean(axis=1)  # the centre is the last "member"
         penalties = results.penalties.reshape(popsize + 1, -1)[:, 0]  # equal on every task of a member
         fitness = penalised_fitness(returns[:popsize], penalties[:popsize], self.es.fitness_l2)
-        self.state, info = self.strategy.tell(state, self.noise, indices, fitness)
+        new_state, info = self.strategy.tell(state, self.noise, indices, fitness)
+        if not np.isfinite(new_state.theta).all():  # stop where it appears, keeping the last finite theta
+            raise NonFiniteUpdate(f"generation {state.generation + 1}: the update is not finite (lr {state.lr:g}, "
+                                  f"sigma {state.sigma:g}, update factor {info['update_factor']:g}); theta is kept as "
+                                  f"after generation {state.generation}")
+        self.state = new_state
         center_return = float(returns[popsize])
         if math.isfinite(center_return) and center_return > self.history.best_center:
             self.history.best_center, self.history.best_theta = center_return, state.theta
@@ -116,7 +126,7 @@ class Trainer:
                  if self.display is not None else contextlib.nullcontext(None))
         with shown as progress:
             results = self.evaluator.evaluate(generation, progress=progress)
-        for message in results.retried:
+        for message in results.warnings:
             self.log(f"warning: {message}")
         return results
 
@@ -169,6 +179,7 @@ class Trainer:
 
     def _stop(self, error: Exception) -> Status:
         """Report what stopped the run, and checkpoint it if that still works."""
+        self.failure = error
         self.log(f"error: {error}")
         if not isinstance(error, SaveError):  # a failed save would most likely fail again
             try:

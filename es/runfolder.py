@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import io
 import math
+import shutil
 import time
 import typing
 from dataclasses import dataclass, field, fields
@@ -163,7 +164,8 @@ class RunFolder:
         return self.path / named_file(prefix, role)
 
     def save_fitness_log(self, env_label: str, log: list[float]) -> None:
-        self.write(files.save_npy, fitness_file_name(self.name, env_label), np.array(log))
+        """float32, as the original's (a numpy array of its float32 rewards)."""
+        self.write(files.save_npy, fitness_file_name(self.name, env_label), np.array(log, dtype=np.float32))
 
     # --- config and metrics -------------------------------------------------------------------
 
@@ -203,9 +205,13 @@ class RunFolder:
         return checkpoint
 
     def _remove_stale_temporaries(self) -> None:
-        """Delete the temporary files of saves that a kill cut short (``es.files``: ``.<name>.*.tmp``)."""
+        """Delete the temporary files and folders of saves that a kill cut short (``es.files``:
+        ``.<name>.*.tmp``)."""
         for path in self.path.glob(".*.tmp"):
-            path.unlink(missing_ok=True)
+            if path.is_dir():
+                shutil.rmtree(path, ignore_errors=True)
+            else:
+                path.unlink(missing_ok=True)
 
 
 def reward_label(mean_fitness: float) -> int:

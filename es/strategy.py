@@ -78,8 +78,9 @@ class OpenES:
         normaliser = self.population_size * state.sigma
         theta, optimizer_state = state.theta, state.optimizer
         if shaped is not None:
-            theta, optimizer_state = self.optimizer(theta, self.weighted_noise(shaped, indices, noise, theta.size),
-                                                    normaliser, state.lr, optimizer_state)
+            with np.errstate(over="ignore", invalid="ignore"):  # a non-finite step is the caller's to refuse
+                theta, optimizer_state = self.optimizer(theta, self.weighted_noise(shaped, indices, noise, theta.size),
+                                                        normaliser, state.lr, optimizer_state)
         new_state = replace(state, theta=theta, lr=decay_lr(state.lr, self.settings),
                             sigma=decay_sigma(state.sigma, self.settings), generation=state.generation + 1,
                             optimizer=optimizer_state)

@@ -30,13 +30,18 @@ def make_tasks(members: np.ndarray, noise_indices: np.ndarray, signs: np.ndarray
                seeds: np.ndarray, n_envs: int) -> np.ndarray:
     """All episodes of a generation: every member on every env and seed, member-major.
 
-    ``seeds[m]`` are member m's episode seeds; mirrored members get the same seeds.
+    ``seeds[m]`` are member m's episode seeds (shape (members, episodes)); mirrored members get the
+    same seeds.
     """
-    rows = [(member, index, sign, env_index, seed)
-            for member, index, sign, member_seeds in zip(members, noise_indices, signs, seeds)
-            for env_index in range(n_envs)
-            for seed in member_seeds]
-    return np.array(rows, dtype=TASK_DTYPE)
+    seeds = np.asarray(seeds, dtype=np.int64)
+    per_member = n_envs * seeds.shape[1]
+    tasks = np.empty(len(members) * per_member, dtype=TASK_DTYPE)
+    tasks["member"] = np.repeat(members, per_member)
+    tasks["noise_index"] = np.repeat(noise_indices, per_member)
+    tasks["sign"] = np.repeat(signs, per_member)
+    tasks["env_index"] = np.tile(np.repeat(np.arange(n_envs), seeds.shape[1]), len(members))
+    tasks["seed"] = np.repeat(seeds[:, None, :], n_envs, axis=1).reshape(-1)
+    return tasks
 
 
 def pin_threads() -> None:

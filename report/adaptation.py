@@ -19,6 +19,7 @@ def plot_adaptation(trace: Trace, path: str | Path) -> None:
     """A PNG of the trace; drawn with matplotlib's Agg canvas, so no display is ever needed."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+    from matplotlib.ticker import MaxNLocator
 
     panels = 2 if trace.layer_norms else 1
     figure = Figure(figsize=(8, 3.2 * panels), layout="constrained")
@@ -43,4 +44,5 @@ def plot_adaptation(trace: Trace, path: str | Path) -> None:
         axes[1].set_yscale("log")
         axes[1].legend(loc="best")
     axes[-1].set_xlabel("policy step")
+    axes[-1].xaxis.set_major_locator(MaxNLocator(integer=True))
     figure.savefig(str(path), dpi=100, format="png")

@@ -16,7 +16,7 @@ def generation_line(row: dict) -> str:
     parameters: weights or Hebbian coefficients), then the centre's return, env steps and seconds."""
     name = row["parameters_name"]
     line = (f"iter {row['generation']} | reward: {row['fitness_mean']:.3f} | "
-            f"update_factor: {row['update_factor']:.6f} | lr: {row['lr']:.6f} | "
+            f"update_factor: {row['update_factor']:.6f} | lr: {row['lr']:g} | "
             f"sum_{name}: {row['parameters_sum']:.3f} | sum_abs_{name}: {row['parameters_abs_sum']:.3f} | "
             f"center: {row['center_return']:.2f} | steps: {row['env_steps']} | {row['seconds']:.1f}s")
     if row["nonfinite"]:

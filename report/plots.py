@@ -36,12 +36,14 @@ def curves(rows: Sequence[dict]) -> dict[str, np.ndarray]:
 def _figure(title: str):
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+    from matplotlib.ticker import MaxNLocator
 
     figure = Figure(figsize=(WIDTH, HEIGHT), dpi=DPI)
     FigureCanvasAgg(figure)
     axes = figure.add_subplot()
     axes.set_title(title, fontsize=10)
     axes.set_xlabel("generation")
+    axes.xaxis.set_major_locator(MaxNLocator(integer=True))  # generations are whole numbers
     axes.set_ylabel("fitness")
     axes.grid(alpha=0.3)
     return figure, axes

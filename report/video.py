@@ -1,56 +1,101 @@
-"""Videos of evaluation episodes: frames kept as the environment renders them, written as mp4."""
+"""Videos of evaluation episodes, written frame by frame as the environment renders them.
+
+The frames go to the file as they come (an H.264 mp4 through imageio's ffmpeg), so a long episode
+never accumulates in memory; odd frame sizes are padded to even ones, as the codec needs. While a
+terminal watches, a progress line counts the frames written.
+"""
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 
+VIDEO_SUFFIXES = (".mp4", ".mkv", ".mov", ".avi")  # containers ffmpeg writes H.264 into
 
-class FrameRecorder(gym.Wrapper):
-    """Keep ``env.render()`` frames (render_mode="rgb_array") of the episodes it sees."""
 
-    def __init__(self, env: gym.Env, max_episodes: int = 1):
+def check_video_path(path: str | Path) -> str | None:
+    """Why ``path`` cannot be a video, or None."""
+    suffix = Path(path).suffix.lower()
+    if suffix not in VIDEO_SUFFIXES:
+        return f"a video file must end in {', '.join(VIDEO_SUFFIXES)}, got {suffix or 'no extension'!r}"
+    return None
+
+
+class VideoRecorder(gym.Wrapper):
+    """Writes the ``env.render()`` frames (render_mode="rgb_array") of the first episode to ``path``."""
+
+    def __init__(self, env: gym.Env, path: str | Path, fps: int = 30):
         super().__init__(env)
-        self.frames: list[np.ndarray] = []
-        self._episodes_left = max_episodes
+        self.path, self.fps = Path(path), fps
+        self.frames_written = 0
+        self._writer = None
+        self._progress = None
+        self._recording = False
+        self._recorded = False
 
     def reset(self, **kwargs):
         result = self.env.reset(**kwargs)
-        self._recording = self._episodes_left > 0
-        self._episodes_left -= 1
+        self._recording = not self._recorded
+        self._recorded = True
         self._capture()
         return result
 
     def step(self, action):
         result = self.env.step(action)
-        self._capture()
+        if result[2] or result[3]:
+            self._capture()
+            self._recording = False
+            self.finish()
+        else:
+            self._capture()
         return result
 
     def _capture(self) -> None:
-        if self._recording:
-            frame = self.env.render()
-            if frame is not None:
-                self.frames.append(np.asarray(frame))
+        if not self._recording:
+            return
+        frame = self.env.render()
+        if frame is None:
+            return
+        frame = np.asarray(frame)[..., :3]
+        if self._writer is None:
+            self._open(frame.shape)
+        self._writer.append_data(np.pad(frame, self._pad))
+        self.frames_written += 1
+        if self._progress is not None:
+            self._progress.update(1)
+
+    def _open(self, shape: tuple[int, ...]) -> None:
+        import imageio.v2 as imageio
+
+        height, width = shape[:2]
+        self._pad = ((0, height % 2), (0, width % 2), (0, 0))
+        self._writer = imageio.get_writer(str(self.path), fps=self.fps, macro_block_size=1, codec="libx264",
+                                          pixelformat="yuv420p")
+        if sys.stderr.isatty():
+            from tqdm import tqdm
+
+            self._progress = tqdm(desc=f"recording {self.path.name}", unit=" frames", file=sys.stderr, leave=False)
+
+    def finish(self) -> None:
+        """Close the file (also after an interrupted episode: what was recorded is kept)."""
+        if self._progress is not None:
+            self._progress.close()
+            self._progress = None
+        if self._writer is not None:
+            self._writer.close()
+            self._writer = None
+
+    def close(self) -> None:
+        self.finish()
+        super().close()
 
 
-def record_first_episode(problem) -> FrameRecorder:
-    """Wrap the first environment so that its first episode's frames are kept."""
-    recorder = FrameRecorder(problem.envs[0], max_episodes=1)
+def record_first_episode(problem, path: str | Path) -> VideoRecorder:
+    """Wrap the first environment so that its first episode's frames are written to ``path``."""
+    env = problem.envs[0]
+    recorder = VideoRecorder(env, path, int(env.metadata.get("render_fps") or 30))
     problem.envs[0] = recorder
     return recorder
-
-
-def write_video(path: str | Path, frames: list[np.ndarray], fps: int = 30) -> None:
-    """An mp4 (H.264) of RGB frames; odd sizes are padded to even ones, as the codec needs."""
-    import imageio.v2 as imageio
-
-    if not frames:
-        raise ValueError("no frames were rendered; the environment may not support rgb_array rendering")
-    height, width = frames[0].shape[:2]
-    pad = ((0, height % 2), (0, width % 2), (0, 0))
-    with imageio.get_writer(str(path), fps=fps, macro_block_size=1, codec="libx264",
-                            pixelformat="yuv420p") as writer:
-        for frame in frames:
-            writer.append_data(np.pad(frame[..., :3], pad))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import queue
+import shlex
 import subprocess
 import sys
 import threading
@@ -72,6 +73,11 @@ class Training:
         except ProcessLookupError:
             pass
         self.process.wait()
+
+
+def hint(script: str, *words) -> str:
+    """A command as the scripts print it: this interpreter, the script, shell-quoted words."""
+    return shlex.join([sys.executable, script, *map(str, words)])
 
 
 def _parent_and_state(pid: int) -> tuple[int, str] | None:

@@ -20,7 +20,7 @@ from es import files
 from es.backends import Results
 from es.shaping import rank_std
 from report.log import GenerationLog
-from tests.run_helpers import Training, descendants, only_run, small_trainer, still_running
+from tests.run_helpers import Training, descendants, hint, only_run, small_trainer, still_running
 
 FAILING_ENV = "tests.failing_env:FailingEnv-v0"
 SMALL = ("--environment", FAILING_ENV, "--popsize", "4", "--seed", "2")
@@ -84,7 +84,7 @@ def test_a_worker_that_crashes_twice_stops_the_run_after_a_checkpoint(tmp_path):
     assert re.fullmatch(rf"error: {FAILING_ENV} failed twice for member \d+ \(episode seed \d+\): "
                         r"worker process died \(killed by SIG(SEGV|ABRT)\)", error)  # ABRT: pygame's handler
     assert training.stdout[-1] == (f"stopped; the checkpoint holds generation 0; "
-                                   f"resume with: python train_static.py --resume {run_dir}")
+                                   f"resume with: {hint('train_static.py', '--resume', run_dir)}")
     with np.load(run_dir / "checkpoint.npz") as saved:
         assert int(saved["generation"]) == 0
 
@@ -181,7 +181,7 @@ def test_a_second_ctrl_c_stops_at_once_even_with_a_stuck_environment(tmp_path):
         training.kill()
     run_dir = only_run(tmp_path)
     assert training.stderr[-1] == (f"train_static.py: stopped at once; saved files are intact "
-                                   f"(resume with: python train_static.py --resume {run_dir})")
+                                   f"(resume with: {hint('train_static.py', '--resume', run_dir)})")
     assert still_running(workers) == set()
     with np.load(run_dir / "checkpoint.npz") as saved:
         assert int(saved["generation"]) == 0

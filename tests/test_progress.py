@@ -18,7 +18,7 @@ import train_static
 from es import files
 from report import plots
 from report.progress import LiveDisplay, QuietDisplay, display_for, estimate
-from tests.run_helpers import Training, only_run
+from tests.run_helpers import Training, hint, only_run
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -106,7 +106,7 @@ def test_output_that_is_not_a_terminal_is_one_line_per_generation(piped_run):
     run_dir, lines = piped_run
     assert lines[0].startswith(f"run folder: {run_dir} | ")
     assert [line.split(" | ")[0] for line in lines[1:-1]] == ["iter 1", "iter 2", "iter 3"]
-    assert lines[-1].startswith("done; evaluate with: python evaluate_static.py --environment CartPole-v1 ")
+    assert lines[-1].startswith(f"done; evaluate with: {hint('evaluate_static.py', '--environment', 'CartPole-v1')} ")
     assert not any("\r" in line for line in lines)
 
 

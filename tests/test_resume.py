@@ -15,7 +15,15 @@ import pytest
 import train_static
 from es import runfolder
 from es.runfolder import RunFolder
-from tests.run_helpers import Training, assert_same_run, descendants, only_run, small_trainer, still_running
+from tests.run_helpers import (
+    Training,
+    assert_same_run,
+    descendants,
+    hint,
+    only_run,
+    small_trainer,
+    still_running,
+)
 
 CARTPOLE = ("--environment", "CartPole-v1", "--popsize", "8", "--seed", "5")
 
@@ -52,7 +60,8 @@ def test_ctrl_c_finishes_the_generation_and_the_resumed_run_matches(tmp_path):
     assert len(workers) >= 2 and still_running(workers) == set()
     run_dir = only_run(tmp_path / "cut")
     last = training.stdout[-1]
-    found = re.fullmatch(r"interrupted after generation (\d+); resume with: python train_static.py --resume (.+)", last)
+    found = re.fullmatch(r"interrupted after generation (\d+); resume with: " + re.escape(hint("train_static.py"))
+                         + r" --resume (.+)", last)
     assert found and found.group(2) == str(run_dir), training.stdout
     stopped = int(found.group(1))
     assert train("--resume", str(run_dir), "--generations", str(stopped + 1), "--threads", "1") == 0
@@ -115,7 +124,7 @@ def test_resume_continues_a_run_that_stopped_with_an_error(tmp_path, monkeypatch
     failing = ("--environment", "tests.failing_env:FailingEnv-v0", "--popsize", "4", "--seed", "2", "--threads", "1")
     assert train(*failing, "--generations", "2", "--folder", str(tmp_path)) == 1
     run_dir = only_run(tmp_path)
-    assert f"stopped; the checkpoint holds generation 0; resume with: python train_static.py --resume {run_dir}" \
+    assert f"stopped; the checkpoint holds generation 0; resume with: {hint('train_static.py', '--resume', run_dir)}" \
         in capsys.readouterr().out
     monkeypatch.delenv("FAILING_ENV_STEP")  # the environment is repaired
     assert train("--resume", str(run_dir)) == 0

@@ -280,3 +280,15 @@ def test_the_constants_the_original_hard_coded_are_settings():
     settings = ESSettings(lr_floor=0.15, sigma_decay=0.5, sigma_floor=0.05)
     assert decay_lr_with(0.2, settings) == 0.2 * 0.995 and decay_lr_with(0.15, settings) == 0.15
     assert decay_sigma_with(0.1, settings) == 0.05 and decay_sigma_with(0.05, settings) == 0.05
+
+
+def test_tasks_are_every_member_on_every_environment_and_seed_member_major():
+    from es.worker import make_tasks
+
+    seeds = np.array([[11, 12], [11, 12], [21, 22]])
+    tasks = make_tasks(np.arange(3), np.array([5, 5, 9]), np.array([1, -1, 0]), seeds, n_envs=2)
+    expected = [(member, index, sign, env, seed)
+                for member, index, sign, member_seeds in zip(range(3), [5, 5, 9], [1, -1, 0], seeds)
+                for env in range(2) for seed in member_seeds]
+    assert tasks.tolist() == expected
+    assert tasks.dtype.names == ("member", "noise_index", "sign", "env_index", "seed")

@@ -8,7 +8,7 @@ Chunks: work is handed out in chunks of about ``CHUNK_SECONDS``, and at most a q
 worker's fair share, so that no worker idles while another finishes a long episode.
 
 Failures: an episode that raises, or a worker that dies (segfault, out of memory, a lost machine),
-is retried once (on a fresh environment, or a fresh worker) and reported in ``Results.retried``. A
+is retried once (on a fresh environment, or a fresh worker) and reported in ``Results.warnings``. A
 second failure of the same task stops the evaluation with an ``EvaluationError`` naming the
 member, the environment and the error.
 """
@@ -44,7 +44,7 @@ class Results:
     returns: np.ndarray  # float64, task order
     steps: np.ndarray  # int64, task order
     penalties: np.ndarray  # float64, task order: mean(theta_m^2) over the penalised parameters
-    retried: list[str] = field(default_factory=list)  # one message per episode that failed once
+    warnings: list[str] = field(default_factory=list)  #: episodes that failed once, workers lost
 
     @classmethod
     def empty(cls, n_tasks: int) -> "Results":
@@ -117,12 +117,16 @@ class TaskBook:
         if self._progress is not None:
             self._progress(1, steps)
 
+    def note(self, message: str) -> None:
+        """A warning for the user (a worker lost, its episodes run again)."""
+        self.results.warnings.append(message)
+
     def failed(self, index: int, message: str) -> None:
         """The first failure of a task is reported and retried; the second stops the evaluation."""
         self._failures[index] += 1
         if self._failures[index] >= MAX_ATTEMPTS:
             raise EvaluationError(self.tasks[index], self.env_ids, message)
-        self.results.retried.append(describe_failure(self.tasks[index], self.env_ids, "once", message)
+        self.results.warnings.append(describe_failure(self.tasks[index], self.env_ids, "once", message)
                                     + "; retried")
 
 

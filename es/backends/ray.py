@@ -226,6 +226,9 @@ class RayEvaluator:
         suspects.update(indices)
         if len(indices) == 1:  # alone in its chunk: this task is what the actor was running
             book.failed(indices[0], f"Ray worker died ({_death_reason(error)})")
+        else:
+            book.note(f"a Ray worker died ({_death_reason(error)}); it was replaced, and its {len(indices)} "
+                      "unfinished episodes run again, one at a time")
 
     def close(self) -> None:
         """Kill the actors; disconnect from Ray if this evaluator connected (a local Ray stops too)."""
