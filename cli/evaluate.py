@@ -92,7 +92,8 @@ def evaluate_main(kind: str, parser: Parser, argv: list[str] | None, load_arrays
             raise UserError("--video records frames off screen; it cannot be combined with --render")
         arrays = load_arrays(args)
         spec = ProblemSpec(env_ids, PolicySettings(kind, **{name: getattr(args, name) for name in
-                                                            ("hebb_rule", "init_weights") if hasattr(args, name)}))
+                                                            ("hebb_rule", "init_weights", "network")
+                                                            if hasattr(args, name)}))
         render_mode = "human" if args.render else ("rgb_array" if args.video else None)
         with explained("cannot make the environments"):
             problem = spec.build(render_mode)

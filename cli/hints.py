@@ -23,5 +23,7 @@ def evaluate_hint(config: TrainConfig, paths: dict[str, Path]) -> str:
     words = [f"python {script} --environment {config.env.environment}"]
     if config.policy.kind == "hebbian":
         words.append(f"--hebb_rule {config.policy.hebb_rule} --init_weights {config.policy.init_weights}")
+    if config.policy.network != "default":
+        words.append(f"--network {config.policy.network}")
     words += [f"{EVALUATE_FLAGS[role][1]} {path}" for role, path in paths.items()]
     return " ".join(words + ["--episodes 10"])
