@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import cv2
 import gymnasium as gym
@@ -252,3 +253,14 @@ def test_nes_utilities_tied_pair_cancels_and_equal_fitness_gives_no_step():
     utilities = nes_utilities(np.array([2.0, 2.0, 1.0, 0.0]))
     assert utilities[0] == utilities[1]
     assert nes_utilities(np.array([-21.0] * 6)) is None
+
+
+@pytest.mark.parametrize("name, environment, network", [("pong", "PongDeterministic-v4", "lstm"),
+                                                        ("cartpole", "CartPole-v1", "small")])
+def test_pytorch_es_experiment_files_hold_its_defaults(name, environment, network):
+    from cli.config import TrainConfig
+
+    config = TrainConfig.from_toml(Path(__file__).resolve().parent.parent / "experiments" / "pytorch_es" / f"{name}.toml")
+    assert (config.env.environment, config.policy.kind, config.policy.network) == (environment, "static", network)
+    es = config.es
+    assert (es.popsize, es.lr, es.decay, es.sigma, es.sigma_decay, es.fitness_l2) == (40, 0.1, 1.0, 0.05, 1.0, 0.0)
