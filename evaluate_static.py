@@ -8,6 +8,7 @@
 import sys
 
 from cli import evaluate_main, evaluation_parser
+from cli.flags import add_network_flag
 from es.files import load_dat
 
 
@@ -15,6 +16,7 @@ def build_parser():
     parser = evaluation_parser("evaluate_static.py", __doc__.splitlines()[0])
     parser.add_argument("--path_weights", required=True, metavar="FILE",
                         help="the .dat file of evolved weights")
+    add_network_flag(parser)
     return parser
 
 

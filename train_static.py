@@ -3,15 +3,19 @@
 
     python train_static.py --environment CarRacing-v0
     python train_static.py --environment CartPole-v1 --generations 20 --popsize 32 --seed 1
+    python train_static.py --environment PongDeterministic-v4 --network lstm --popsize 40 --lr 0.1 --sigma 0.05
 """
 
 import sys
 
 from cli import train_main, training_parser
+from cli.flags import add_network_flag
 
 
 def build_parser():
-    return training_parser("train_static.py", __doc__.splitlines()[0], folder="weights")
+    parser = training_parser("train_static.py", __doc__.splitlines()[0], folder="weights")
+    add_network_flag(parser)
+    return parser
 
 
 def main(argv=None) -> int:

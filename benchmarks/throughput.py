@@ -4,6 +4,7 @@
     python benchmarks/throughput.py --environment HalfCheetah-v5 --policy static
     python benchmarks/throughput.py --environment HalfCheetah-v5 --policy hebbian --hebb_rule ABCD_lr
     python benchmarks/throughput.py --environment AntBulletEnv-v0 --policy static --scaling
+    python benchmarks/throughput.py --environment ALE/Pong-v5 --network lstm
 
 The ratio compares, over the same episodes, the real evaluation path (the evaluator, its worker,
 the recipe's wrappers, the policy, the rollout) with ``env.step`` of a plain ``gym.make``
@@ -15,6 +16,13 @@ drift (about +-40 % here) and other load cancel out; the median over rounds is p
 --scaling compares generations with 1 and 2 worker processes, in wall time. Targets (issues 2, 3):
 static MLP on HalfCheetah-v5 >= 0.85, Hebbian ABCD_lr >= 0.70 on HalfCheetah-v5 and >= 0.90 on
 AntBulletEnv-v0 (--threads 1); 1 -> 2 workers on AntBulletEnv-v0 >= 1.8x (--scaling).
+
+For image observations the preprocessing (Atari's frame skip, no-op starts, FIRE reset and frame
+stack, or pytorch-es's 42 x 42 normalised frames) belongs to the environment's cost, not the
+loop's: the raw side is then the environment as ``make_env`` builds it for the network (every
+wrapper but the action mapping), replaying the actions the episodes chose, resets included. The
+policy's own cost per step (``act``, CPU time) is printed too; issue 13's target for
+``--network lstm``: <= 1 ms.
 """
 
 from __future__ import annotations
@@ -31,11 +39,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import envs  # noqa: E402  (headless defaults, pyBullet registration)
 import gymnasium as gym  # noqa: E402
-from envs import ProblemSpec, quiet_output  # noqa: E402
+from envs import ProblemSpec, make_env, quiet_output  # noqa: E402
 from es.backends import Generation, ProcessEvaluator, SerialEvaluator  # noqa: E402
 from es.noise import NoiseTable  # noqa: E402
 from es.worker import make_tasks  # noqa: E402
-from policies import PolicySettings  # noqa: E402
+from policies import NETWORKS, PolicySettings, preprocessing  # noqa: E402
 
 
 def generation_tasks(population: int, dim: int, noise: NoiseTable, rng: np.random.Generator) -> np.ndarray:
@@ -53,29 +61,43 @@ def training_rate(evaluator, theta: np.ndarray, sigma: float, tasks: np.ndarray)
     return results.steps.sum() / (time.perf_counter() - started) / evaluator.workers
 
 
-def record_actions(evaluator: SerialEvaluator, theta: np.ndarray, sigma: float, tasks: np.ndarray):
-    """The (seed, actions) of every episode of ``tasks``, as the bare environment received them."""
-    base = evaluator._worker.problem.envs[0].unwrapped
-    episodes, step = [], base.step
+def record_actions(evaluator: SerialEvaluator, theta: np.ndarray, sigma: float, tasks: np.ndarray,
+                   preprocessed: bool):
+    """The (seed, actions) of every episode of ``tasks``, as the bare environment (or, ``preprocessed``,
+    the environment below the action mapping) received them; and the policy's CPU seconds per step."""
+    problem = evaluator._worker.problem
+    base = problem.envs[0].env if preprocessed else problem.envs[0].unwrapped
+    episodes, step, act = [], base.step, problem.policy.act
+    acting = [0.0, 0]
 
     def recording_step(action):
         episodes[-1][1].append(np.array(action, copy=True))
         return step(action)
 
-    base.step = recording_step
+    def timed_act(params, state, obs):
+        started = time.process_time()
+        result = act(params, state, obs)
+        acting[0] += time.process_time() - started
+        acting[1] += 1
+        return result
+
+    base.step, problem.policy.act = recording_step, timed_act
     try:
         for index, task in enumerate(tasks):
             episodes.append((int(task["seed"]), []))
             evaluator.evaluate(Generation(0, theta, sigma, tasks[index:index + 1]))
     finally:
         del base.step
-    return episodes
+        problem.policy.act = act
+    return episodes, acting[0] / acting[1]
 
 
-def replay(env: gym.Env, seed: int, actions: list[np.ndarray]) -> float:
-    """CPU seconds of ``env.step`` over one recorded episode (the reset excluded)."""
-    env.reset(seed=seed)
+def replay(env: gym.Env, seed: int, actions: list[np.ndarray], with_reset: bool) -> float:
+    """CPU seconds of ``env.step`` over one recorded episode (the reset too if ``with_reset``)."""
     started = time.process_time()
+    env.reset(seed=seed)
+    if not with_reset:
+        started = time.process_time()
     for action in actions:
         env.step(action)
     return time.process_time() - started
@@ -98,29 +120,38 @@ def setup(args, spec: ProblemSpec, workers: int):
     return evaluator, noise, theta, tasks
 
 
-def measure_ratio(args, spec: ProblemSpec) -> list[float]:
-    """Per round, training time / raw time over the same episodes, alternating episode by episode
-    so that both see the same moments of the machine's drift."""
-    evaluator, noise, theta, tasks = setup(args, spec, 1)
+def raw_environment(spec: ProblemSpec, preprocessed: bool) -> gym.Env:
+    if preprocessed:  # every wrapper of the training's environment but the action mapping
+        return make_env(spec.env_ids[0], preprocessing=preprocessing(spec.policy))[0].env
     with quiet_output():
-        raw_env = gym.make(spec.env_ids[0])
-        raw_env.reset(seed=0)
-    ratios = []
+        env = gym.make(spec.env_ids[0])
+        env.reset(seed=0)
+    return env
+
+
+def measure_ratio(args, spec: ProblemSpec, preprocessed: bool) -> tuple[list[tuple[float, float]], float, int]:
+    """Per round, (raw, training) steps per CPU second over the same episodes, alternating episode by
+    episode so that both see the same moments of the machine's drift; the policy's seconds per step;
+    the steps of one round."""
+    evaluator, noise, theta, tasks = setup(args, spec, 1)
+    raw_env = raw_environment(spec, preprocessed)
+    rates = []
     try:
-        episodes = record_actions(evaluator, theta, args.sigma, tasks)
+        episodes, act_seconds = record_actions(evaluator, theta, args.sigma, tasks, preprocessed)
+        steps = sum(len(actions) for _, actions in episodes)
         for _ in range(args.rounds):
             raw_seconds = trained_seconds = 0.0
             for index, (seed, actions) in enumerate(episodes):
-                raw_seconds += replay(raw_env, seed, actions)
+                raw_seconds += replay(raw_env, seed, actions, preprocessed)
                 started = time.process_time()
                 evaluator.evaluate(Generation(0, theta, args.sigma, tasks[index:index + 1]))
                 trained_seconds += time.process_time() - started
-            ratios.append(raw_seconds / trained_seconds)
+            rates.append((steps / raw_seconds, steps / trained_seconds))
     finally:
         evaluator.close()
         noise.close()
         raw_env.close()
-    return ratios
+    return rates, act_seconds, steps
 
 
 def measure_rate(args, spec: ProblemSpec, workers: int) -> list[float]:
@@ -139,22 +170,31 @@ def main() -> int:
     parser.add_argument("--policy", choices=("static", "hebbian"), default="static")
     parser.add_argument("--hebb_rule", default="ABCD_lr")
     parser.add_argument("--init_weights", default="uni")
+    parser.add_argument("--network", choices=tuple(NETWORKS), default="default", help="static networks: the shape")
     parser.add_argument("--scaling", action="store_true", help="compare 1 and 2 workers instead")
     parser.add_argument("--popsize", type=int, default=8, help="episodes per measured generation")
     parser.add_argument("--sigma", type=float, default=0.1)
     parser.add_argument("--rounds", type=int, default=5)
     args = parser.parse_args()
     env_id = envs.resolve_env_id(args.environment)
-    spec = ProblemSpec((env_id,), PolicySettings(args.policy, args.hebb_rule, args.init_weights))
+    spec = ProblemSpec((env_id,), PolicySettings(args.policy, args.hebb_rule, args.init_weights, network=args.network))
     label = f"{env_id}, {args.policy}" + (f" {args.hebb_rule}" if args.policy == "hebbian" else "")
+    label += f" --network {args.network}" if args.network != "default" else ""
     if args.scaling:
         one = statistics.median(measure_rate(args, spec, 1))
         two = statistics.median(measure_rate(args, spec, 2))
         print(f"{label}: 1 worker {one:,.0f} steps/s, 2 workers {2 * two:,.0f} steps/s in total")
         print(f"speed-up 1 -> 2 workers: {2 * two / one:.2f}x")
         return 0
-    ratios = measure_ratio(args, spec)
-    print(f"{label}, 1 worker: training loop / raw env.step, same episodes")
+    probe = spec.build()
+    preprocessed = probe.net.pixels
+    probe.close()
+    rates, act_seconds, steps = measure_ratio(args, spec, preprocessed)
+    raw = "the environment with the same preprocessing" if preprocessed else "raw env.step"
+    print(f"{label}, 1 worker: training loop against {raw}, the same {steps} steps per round (CPU time)")
+    print(f"steps per second: training {statistics.median(rate[1] for rate in rates):,.0f}, raw "
+          f"{statistics.median(rate[0] for rate in rates):,.0f}; policy {act_seconds * 1e6:.0f} µs per step")
+    ratios = [trained / raw for raw, trained in rates]
     print(f"ratio training / raw: {statistics.median(ratios):.3f} (rounds: "
           + ", ".join(f"{ratio:.2f}" for ratio in ratios) + ")")
     return 0

@@ -139,7 +139,7 @@ def evaluate_main(kind: str, parser: Parser, argv: list[str] | None, load_arrays
             raise UserError("--video records frames off screen; it cannot be combined with --render")
         arrays = load_arrays(args)
         render_mode = "human" if args.render else ("rgb_array" if args.video else None)
-        policy = PolicySettings(kind, **{name: getattr(args, name) for name in ("hebb_rule", "init_weights")
+        policy = PolicySettings(kind, **{name: getattr(args, name) for name in ("hebb_rule", "init_weights", "network")
                                          if hasattr(args, name)})
         problem = build_problem(ProblemSpec(env_ids, policy), render_mode)
         with explained("cannot load the weights"):

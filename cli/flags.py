@@ -68,3 +68,13 @@ def flag_value(text: str | None) -> bool:
     if lowered in ("0", "false", "no", "off", ""):
         return False
     raise argparse.ArgumentTypeError(f"expected true or false, got {text!r}")
+
+
+def add_network_flag(parser: argparse.ArgumentParser) -> None:
+    """``--network`` of the static scripts: the original's network, or one of pytorch-es's."""
+    from policies import NETWORKS
+
+    parser.add_argument("--network", choices=tuple(NETWORKS), default="default",
+                        help="default: the original's MLP (state vectors) or CNN (images); small: pytorch-es's "
+                             "64-64 selu MLP (state vectors); lstm: pytorch-es's conv-LSTM on its 42x42 "
+                             "normalised frames (images)")

@@ -45,6 +45,8 @@ def evaluate_hint(config: TrainConfig, paths: dict[str, Path]) -> str:
     words: list[object] = ["--environment", config.env.environment]
     if config.policy.kind == "hebbian":
         words += ["--hebb_rule", config.policy.hebb_rule, "--init_weights", config.policy.init_weights]
+    if config.policy.network != "default":
+        words += ["--network", config.policy.network]
     for role, path in paths.items():
         words += [EVALUATE_FLAGS[role][1], path]
     return command(EVALUATE_FLAGS[next(iter(paths))][0], *words, "--episodes", 10)

@@ -183,7 +183,7 @@ def versions() -> dict:
 
     found = {"python": sys.version.split()[0]}
     for package in ("numpy", "torch", "gymnasium", "mujoco", "pybullet", "pybullet-envs-gymnasium",
-                    "box2d", "numba", "ray"):
+                    "box2d", "numba", "ray", "ale-py"):
         try:
             found[package] = metadata.version(package)
         except metadata.PackageNotFoundError:

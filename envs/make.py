@@ -16,6 +16,7 @@ import sys
 import gymnasium as gym
 from gymnasium.envs.registration import parse_env_id
 
+from envs import atari
 from envs.recipes import Recipe, recipe_for
 
 
@@ -57,6 +58,8 @@ def resolve_env_id(env_id: str, notify=print) -> str:
         why = "names no version" if version is None else f"is retired in Gymnasium {gym.__version__}"
         notify(f"note: {env_id} {why}; using {newest.id}")
         return prefix + newest.id
+    if not atari.AVAILABLE and atari.looks_like_atari(env_id):
+        raise EnvironmentError_(f"unknown environment {env_id!r}: {atari.INSTALL_HINT}")
     known = [spec_id for spec_id, spec in registry.items() if _usable(spec)]
     close = difflib.get_close_matches(env_id, known, n=5, cutoff=0.5)
     hint = (f"; did you mean {', '.join(close)}?" if close else
@@ -92,8 +95,9 @@ def quiet_output():
         os.close(devnull)
 
 
-def make_env(env_id: str, render_mode: str | None = None) -> tuple[gym.Env, Recipe]:
-    """Make a registered (already resolved) id, wrapped by its family's recipe, warmed up.
+def make_env(env_id: str, render_mode: str | None = None, preprocessing: str = "default") -> tuple[gym.Env, Recipe]:
+    """Make a registered (already resolved) id, wrapped by its family's recipe (images preprocessed
+    for the network, ``envs.recipes.PREPROCESSING``), warmed up.
 
     The warm-up reset matters for pyBullet: its first reset loads the model and later ones restore
     a saved state, which gives slightly different trajectories. After the warm-up every episode,
@@ -102,6 +106,6 @@ def make_env(env_id: str, render_mode: str | None = None) -> tuple[gym.Env, Reci
     with quiet_output():
         env = gym.make(env_id, render_mode=render_mode)
         recipe = recipe_for(env)
-        env = recipe.wrap(env)
+        env = recipe.wrap(env, preprocessing)
         env.reset(seed=0)
     return env, recipe

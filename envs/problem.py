@@ -14,7 +14,7 @@ from gymnasium import spaces
 from envs.make import make_env
 from envs.recipes import Recipe, import_recipe_modules
 from envs.rollout import Episode, rollout
-from policies import NetworkSpec, PolicySettings, kind_of, make_policy
+from policies import NetworkSpec, PolicySettings, kind_of, make_policy, preprocessing
 
 
 @dataclass(frozen=True)
@@ -50,7 +50,7 @@ class Problem:
         self.recipes: list[Recipe] = []
         import_recipe_modules(spec.recipe_modules)
         for env_id in spec.env_ids:
-            env, recipe = make_env(env_id, render_mode)
+            env, recipe = make_env(env_id, render_mode, preprocessing(spec.policy))
             self.envs.append(env)
             self.recipes.append(recipe)
         self.net = network_spec(self.envs[0], self.recipes[0])
@@ -84,7 +84,7 @@ class Problem:
             self.envs[env_index].close()
         except Exception:  # the env is already broken; a failing close must not hide the retry
             pass
-        self.envs[env_index], _ = make_env(self.spec.env_ids[env_index])
+        self.envs[env_index], _ = make_env(self.spec.env_ids[env_index], preprocessing=preprocessing(self.spec.policy))
 
     def close(self) -> None:
         for env in self.envs:

@@ -10,9 +10,15 @@ a network option:
     CarRacing     raw      [tanh, sigmoid, sigmoid]  21st negative reward in a row    -
     pyBullet ant  tanh     clip (a no-op)            31st negative after step 200     40-step burn-in, progress reward
     pyBullet      tanh     clip (a no-op)            31st negative after step 200     -
+    Atari         raw      argmax                    the environment's own            no-op starts, frame skip 4,
+                                                                                      FIRE reset, frame stack
     anything else raw      clip (Box) / argmax       the environment's own            -
 
 Hebbian weights are normalised after every update for every family except pyBullet.
+
+Images are preprocessed for the network that will see them: ``default`` (the original's 84 x 84 RGB,
+or Atari's stack of 4 grayscale frames) or ``pytorch-es`` (its 1 x 42 x 42 running-normalised frame,
+``envs.pytorch_es``), as the policy's network asks (``policies.registry.NETWORKS``).
 
 Custom families are added with ``register_recipe`` from an importable module. The module is
 recorded (``custom_recipe_modules``, saved in config.json), and every process that builds the
@@ -29,6 +35,8 @@ from typing import Callable
 import gymnasium as gym
 from gymnasium import spaces
 
+from envs.atari import atari_pipeline, is_atari
+from envs.pytorch_es import pytorch_es_frames
 from envs.wrappers import (
     ArgmaxAction,
     BurnIn,
@@ -52,10 +60,13 @@ class Recipe:
     stop_patience: int | None = None  # stop after more than this many negative rewards in a row
     stop_check_after: int = 0
     normalise_hebbian: bool = True
+    preprocess: Callable[[gym.Env, str], gym.Env] | None = None  # replaces observation_pipeline (Atari)
 
-    def wrap(self, env: gym.Env) -> gym.Env:
-        """Observation pipeline, then the family's quirks, innermost first."""
-        env = observation_pipeline(env)
+    def wrap(self, env: gym.Env, preprocessing: str = "default") -> gym.Env:
+        """Observation pipeline (images as ``preprocessing`` asks), then the family's quirks, innermost first."""
+        if preprocessing not in PREPROCESSING:
+            raise ValueError(f"unknown image preprocessing {preprocessing!r}; valid: {', '.join(PREPROCESSING)}")
+        env = (self.preprocess or observation_pipeline)(env, preprocessing)
         if self.burn_in:
             env = BurnIn(env, self.burn_in)
         if self.reward is not None:
@@ -65,12 +76,15 @@ class Recipe:
         return (self.action or default_action)(env)
 
 
-def observation_pipeline(env: gym.Env) -> gym.Env:
+PREPROCESSING = ("default", "pytorch-es")
+
+
+def observation_pipeline(env: gym.Env, preprocessing: str = "default") -> gym.Env:
     space = env.observation_space
     if isinstance(space, spaces.Discrete):
         return OneHotObservation(env)
     if isinstance(space, spaces.Box) and len(space.shape) == 3:
-        return PixelObservation(env)
+        return PixelObservation(env) if preprocessing == "default" else pytorch_es_frames(env)
     if isinstance(space, spaces.Box) and len(space.shape) == 1:
         return env
     raise ValueError(f"unsupported observation space {space}: expected a vector Box, an RGB image "
@@ -110,9 +124,10 @@ _PYBULLET = dict(squash_output=True, stop_patience=30, stop_check_after=201, nor
 CAR_RACING = Recipe("CarRacing", _is_car_racing, action=CarRacingAction, stop_patience=20)
 PYBULLET_ANT = Recipe("pyBullet ant", is_pybullet_ant, burn_in=40, reward=ProgressReward, **_PYBULLET)
 PYBULLET = Recipe("pyBullet", _is_pybullet, **_PYBULLET)
+ATARI = Recipe("Atari", is_atari, preprocess=atari_pipeline)
 GYMNASIUM = Recipe("Gymnasium", lambda env: True)
 
-_RECIPES: list[Recipe] = [CAR_RACING, PYBULLET_ANT, PYBULLET, GYMNASIUM]
+_RECIPES: list[Recipe] = [CAR_RACING, PYBULLET_ANT, PYBULLET, ATARI, GYMNASIUM]
 _CUSTOM_MODULES: list[str] = []  # the modules that registered recipes, in order
 
 

@@ -5,7 +5,8 @@ The flat parameter vector has up to three named parts:
 - ``coefficients`` (n_synapses, k): one row of k rule coefficients per synapse. Row
   ``layer_offset + i * n_out + j`` belongs to the synapse from pre-synaptic unit i to post-synaptic
   unit j, as in the original code (upstream spec §3.3), so original coefficient files load.
-- ``cnn`` (1362): the conv weights of a pixel network. Evolved, never plastic.
+- ``cnn`` (1362 for RGB, 1416 for a stack of 4 frames): the conv weights of a pixel network.
+  Evolved, never plastic.
 - ``initial_weights``: with ``--init_weights coevolve``, the weights each episode starts from
   (all module weights in PyTorch order: conv1, conv2 for pixels, then the three dense layers).
 
@@ -24,7 +25,7 @@ import numpy as np
 from policies.conv import ConvFeatures
 from policies.init import COEVOLVE, INIT_CHOICES, sample_weights
 from policies.kernels import hebbian_forward_update
-from policies.network import CONV_SIZE, Layout, NetworkSpec, from_kernel_layout, to_kernel_layout
+from policies.network import Layout, NetworkSpec, from_kernel_layout, to_kernel_layout
 from policies.rules import get_rule
 from policies.static import check_length, head_buffers
 
@@ -57,6 +58,7 @@ class HebbianPolicy:
                              f"{', '.join(INIT_CHOICES)}")
         if distribution not in DISTRIBUTIONS:
             raise ValueError(f"unknown --distribution {distribution!r}; valid values: {', '.join(DISTRIBUTIONS)}")
+        net.check_cnn_input()
         self.net = net
         self.distribution = distribution
         self.rule = get_rule(rule)
@@ -65,9 +67,9 @@ class HebbianPolicy:
         n_syn, k = net.n_synapses, self.rule.n_coeffs
         parts: list[tuple[str, tuple[int, ...]]] = [("coefficients", (n_syn, k))]
         if init_weights == COEVOLVE:
-            parts.append(("initial_weights", (n_syn + (CONV_SIZE if net.pixels else 0),)))
+            parts.append(("initial_weights", (n_syn + net.conv_size,)))
         elif net.pixels:
-            parts.append(("cnn", (CONV_SIZE,)))
+            parts.append(("cnn", (net.conv_size,)))
         self.layout = Layout(parts)
         self.num_params = self.layout.size
         self.penalised = self.layout["coefficients"].slice  # the original's L2 term: coefficients only
@@ -95,8 +97,8 @@ class HebbianPolicy:
         """The episode's starting dense weights (kernels' layout) and the conv weights, if any."""
         if self.init_weights == COEVOLVE:
             initial = params[self.layout["initial_weights"].slice]
-            conv = initial[:CONV_SIZE] if self.net.pixels else None
-            dense = initial[CONV_SIZE:] if self.net.pixels else initial
+            conv = initial[:self.net.conv_size] if self.net.pixels else None
+            dense = initial[self.net.conv_size:]
             return to_kernel_layout(dense, self.net.layer_shapes), conv
         dense = np.concatenate([sample_weights(self.init_weights, rng, shape).ravel()
                                 for shape in self.net.layer_shapes])
@@ -106,7 +108,7 @@ class HebbianPolicy:
     def reset(self, params: np.ndarray, rng: np.random.Generator) -> HebbianState:
         weights, conv = self.initial_weights(params, rng)
         work, out = head_buffers(self.net)
-        features = ConvFeatures(conv) if conv is not None else None
+        features = ConvFeatures(conv, self.net.conv_shapes) if conv is not None else None
         return HebbianState(weights, self.fold(params), np.ones(3, dtype=np.float32), work, out, features)
 
     def act(self, params: np.ndarray, state: HebbianState, obs: np.ndarray):

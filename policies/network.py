@@ -1,7 +1,8 @@
 """Network shapes shared by the static and the Hebbian policies (upstream spec §3.1-3.3).
 
-State vectors go through an MLP  obs -> 128 -> 64 -> actions; pixels (3 x 84 x 84) first through
-two conv layers whose 648 features feed the same head. No layer has a bias; hidden layers use tanh;
+State vectors go through an MLP  obs -> 128 -> 64 -> actions; pixels (C x 84 x 84: 3 for the
+original's RGB frames, 4 for an Atari frame stack) first through two conv layers whose 648 features
+feed the same head; the first conv layer takes the observation's C channels. No layer has a bias; hidden layers use tanh;
 the output is raw unless the environment's recipe asks for tanh (pyBullet).
 
 A ``Layout`` names the parts of a flat parameter vector, so that it can be split into weights,
@@ -15,10 +16,15 @@ from dataclasses import dataclass
 import numpy as np
 
 HIDDEN = (128, 64)
-CONV_SHAPES = ((6, 3, 3, 3), (8, 6, 5, 5))
-CONV_SIZE = sum(int(np.prod(shape)) for shape in CONV_SHAPES)  # 1362
 CONV_FEATURES = 648
-PIXEL_SHAPE = (3, 84, 84)
+PIXEL_SIZE = 84  # the CNN's input is C x 84 x 84
+
+
+def conv_shapes(channels: int) -> tuple[tuple[int, int, int, int], ...]:
+    """The two conv weights (out, in, k, k) for ``channels`` input channels (RGB: 3)."""
+    return (6, channels, 3, 3), (8, 6, 5, 5)
+
+
 
 
 @dataclass(frozen=True)
@@ -32,12 +38,25 @@ class NetworkSpec:
     def __post_init__(self) -> None:
         if len(self.obs_shape) not in (1, 3):
             raise ValueError(f"observations must be vectors or images, got shape {self.obs_shape}")
-        if self.pixels and tuple(self.obs_shape) != PIXEL_SHAPE:
-            raise ValueError(f"pixel observations must be {PIXEL_SHAPE}, got {self.obs_shape}")
 
     @property
     def pixels(self) -> bool:
         return len(self.obs_shape) == 3
+
+    def check_cnn_input(self) -> None:
+        """The conv front end of the static and Hebbian networks needs C x 84 x 84 images."""
+        if self.pixels and (self.obs_shape[0] < 1 or tuple(self.obs_shape[1:]) != (PIXEL_SIZE, PIXEL_SIZE)):
+            raise ValueError(f"pixel observations must be C x {PIXEL_SIZE} x {PIXEL_SIZE}, got {self.obs_shape}")
+
+    @property
+    def conv_shapes(self) -> tuple[tuple[int, int, int, int], ...]:
+        """The conv weights for this observation's channels (pixel networks only)."""
+        return conv_shapes(self.obs_shape[0])
+
+    @property
+    def conv_size(self) -> int:
+        """How many conv weights a pixel network has (0 for state vectors)."""
+        return sum(int(np.prod(shape)) for shape in self.conv_shapes) if self.pixels else 0
 
     @property
     def head_sizes(self) -> tuple[int, int, int, int]:

@@ -1,8 +1,8 @@
 """Static networks: the weights themselves are evolved (the baseline of Najarro & Risi 2020).
 
 The flat vector is the original's ``parameters_to_vector`` order, each weight C-order in PyTorch's
-(out, in) orientation: [conv1 (6,3,3,3), conv2 (8,6,5,5)] for pixels, then fc1, fc2, fc3. An
-original ``.dat`` weight file therefore loads unchanged.
+(out, in) orientation: [conv1 (6,C,3,3), conv2 (8,6,5,5)] for pixels (C = 3 for RGB, 4 for an
+Atari frame stack), then fc1, fc2, fc3. An original ``.dat`` weight file therefore loads unchanged.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import numpy as np
 from policies.conv import ConvFeatures
 from policies.init import default_bound
 from policies.kernels import static_forward
-from policies.network import CONV_SHAPES, CONV_SIZE, Layout, NetworkSpec, to_kernel_layout
+from policies.network import Layout, NetworkSpec, to_kernel_layout
 
 
 @dataclass
@@ -39,18 +39,35 @@ def check_length(name: str, array: np.ndarray, expected: int, what: str) -> np.n
     return array.reshape(-1).astype(np.float32)
 
 
-class StaticPolicy:
+class WeightFile:
+    """One flat weight vector in one ``.dat`` file, named as the original ES code named it; every
+    weight is penalised by the L2 term."""
+
     penalised_name = "w"
     roles = ("weights",)
+    num_params: int
 
+    def export(self, params: np.ndarray) -> dict[str, np.ndarray]:
+        return {"weights": np.asarray(params, dtype=np.float32).copy()}
+
+    def load(self, arrays: dict[str, np.ndarray]) -> np.ndarray:
+        return check_length("the weight file", arrays["weights"], self.num_params, "this network")
+
+    def file_name(self, role: str, env: str, reward: int, population: int, generation: int) -> str:
+        """The original ES code's name (upstream spec §6)."""
+        return f"{env}__rew_{reward}__pop_{population}__{generation}.dat"
+
+
+class StaticPolicy(WeightFile):
     def __init__(self, net: NetworkSpec):
+        net.check_cnn_input()
         self.net = net
-        conv = [(f"conv{i + 1}", shape) for i, shape in enumerate(CONV_SHAPES)] if net.pixels else []
+        conv = [(f"conv{i + 1}", shape) for i, shape in enumerate(net.conv_shapes)] if net.pixels else []
         dense = [(f"fc{i + 1}", shape) for i, shape in enumerate(net.layer_shapes)]
         self.layout = Layout(conv + dense)
         self.num_params = self.layout.size
         self.penalised = slice(0, self.num_params)  # the L2 term covers every weight
-        self._head = slice(CONV_SIZE if net.pixels else 0, self.num_params)
+        self._head = slice(net.conv_size, self.num_params)
         self._sizes = net.head_sizes
 
     def initial_params(self, rng: np.random.Generator) -> np.ndarray:
@@ -63,7 +80,7 @@ class StaticPolicy:
 
     def reset(self, params: np.ndarray, rng: np.random.Generator | None = None) -> StaticState:
         work, out = head_buffers(self.net)
-        features = ConvFeatures(params[:CONV_SIZE]) if self.net.pixels else None
+        features = ConvFeatures(params[:self.net.conv_size], self.net.conv_shapes) if self.net.pixels else None
         return StaticState(to_kernel_layout(params[self._head], self.net.layer_shapes), work, out, features)
 
     def act(self, params: np.ndarray, state: StaticState, obs: np.ndarray):
@@ -71,13 +88,3 @@ class StaticPolicy:
             obs = state.features(obs)
         static_forward(state.head, obs, state.work, *self._sizes, self.net.squash_out)
         return state.out, state
-
-    def export(self, params: np.ndarray) -> dict[str, np.ndarray]:
-        return {"weights": np.asarray(params, dtype=np.float32).copy()}
-
-    def load(self, arrays: dict[str, np.ndarray]) -> np.ndarray:
-        return check_length("the weight file", arrays["weights"], self.num_params, "this network")
-
-    def file_name(self, role: str, env: str, reward: int, population: int, generation: int) -> str:
-        """The original ES code's name (upstream spec §6)."""
-        return f"{env}__rew_{reward}__pop_{population}__{generation}.dat"

@@ -329,7 +329,7 @@ def test_an_unknown_environment_names_a_shell_command_to_list_them():
     import envs
 
     with pytest.raises(envs.EnvironmentError_, match=r"python -c 'import envs, gymnasium; gymnasium.pprint_registry\(\)'"):
-        envs.resolve_env_id("Zzqxv-v0")
+        envs.resolve_env_id("qqqqqqqqqqqqqqqqqq-v9")
 
 
 def test_paper_help_is_whole():
