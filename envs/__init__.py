@@ -1,7 +1,9 @@
 """Environments: construction, per-family recipes, wrappers, damaged morphologies, the rollout.
 
 Importing this package sets headless defaults (no display is ever needed) unless the user set
-them, and registers the pyBullet environments with Gymnasium.
+them, registers the pyBullet environments and the damaged ants with Gymnasium, and makes
+``CarRacing-v3`` the fast, pixel-identical ``envs.car_racing.FastCarRacing`` (Gymnasium's own class
+stays available as ``CarRacingStock-v3``).
 """
 
 import os
@@ -25,6 +27,10 @@ with quiet_output():
         pass
 
 import envs.damaged  # noqa: E402,F401  (registers the damaged ants of Najarro & Risi 2020)
+try:
+    import envs.car_racing  # noqa: E402,F401  (CarRacing-v3 -> the fast class, CarRacingStock-v3 -> Gymnasium's)
+except (ImportError, gym.error.DependencyNotInstalled):  # Box2D or pygame missing: no CarRacing at all
+    pass
 
 __all__ = ["EnvironmentError_", "Episode", "Problem", "ProblemSpec", "Recipe", "episode_rng",
            "make_env", "quiet_output", "recipe_for", "register_recipe", "resolve_env_id", "rollout"]
