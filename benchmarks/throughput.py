@@ -4,6 +4,7 @@
     python benchmarks/throughput.py --environment HalfCheetah-v5 --policy static
     python benchmarks/throughput.py --environment HalfCheetah-v5 --policy hebbian --hebb_rule ABCD_lr
     python benchmarks/throughput.py --environment AntBulletEnv-v0 --policy static --scaling
+    python benchmarks/throughput.py --environment CarRacing-v3 --policy hebbian
 
 The ratio compares, over the same episodes, the real evaluation path (the evaluator, its worker,
 the recipe's wrappers, the policy, the rollout) with ``env.step`` of a plain ``gym.make``
@@ -53,12 +54,17 @@ def training_rate(evaluator, theta: np.ndarray, sigma: float, tasks: np.ndarray)
 
 
 def record_actions(evaluator: SerialEvaluator, theta: np.ndarray, sigma: float, tasks: np.ndarray):
-    """The (seed, actions) of every episode of ``tasks``, as the bare environment received them."""
+    """The (seed, actions) of every episode of ``tasks``, as the bare environment received them.
+
+    A ``step(None)`` is not an action: CarRacing's ``reset`` makes one itself to draw the first
+    frame, and ``replay`` reproduces it by resetting.
+    """
     base = evaluator._worker.problem.envs[0].unwrapped
     episodes, step = [], base.step
 
     def recording_step(action):
-        episodes[-1][1].append(np.array(action, copy=True))
+        if action is not None:
+            episodes[-1][1].append(np.array(action, copy=True))
         return step(action)
 
     base.step = recording_step
