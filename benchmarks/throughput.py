@@ -13,6 +13,9 @@ trajectories, so it isolates what the training loop adds (a simulator's step tim
 state: a policy that saturates its actions makes MuJoCo slower than random actions do). The two
 alternate episode by episode and are timed in CPU time of this process, so that the machine's
 drift (about +-40 % here) and other load cancel out; the median over rounds is printed.
+Resets are outside the raw side: on CarRacing, whose reset generates a track (about 10-20 ms) and
+whose generation-0 episodes stop after some 25 steps, that alone keeps the ratio well below the
+others' (``benchmarks/car_racing.py`` compares the loop with Gymnasium's class instead).
 --scaling compares generations with 1 and 2 worker processes, in wall time. Targets (issues 2, 3):
 static MLP on HalfCheetah-v5 >= 0.85, Hebbian ABCD_lr >= 0.70 on HalfCheetah-v5 and >= 0.90 on
 AntBulletEnv-v0 (--threads 1); 1 -> 2 workers on AntBulletEnv-v0 >= 1.8x (--scaling).
