@@ -15,6 +15,7 @@ import gymnasium as gym
 import numpy as np
 import pygame
 import pytest
+from pygame import gfxdraw
 
 import envs
 from envs import pygame_raster
@@ -23,17 +24,19 @@ from gymnasium.envs.box2d.car_racing import CarRacing, PLAYFIELD
 
 
 def pair(render_mode: str | None = None, **kwargs) -> tuple[gym.Env, gym.Env]:
+    """Gymnasium's class and the project's, made alike."""
     with envs.quiet_output():
-        return gym.make(STOCK_ID, render_mode=render_mode, **kwargs), gym.make("CarRacing-v3", render_mode=render_mode,
-                                                                             **kwargs)
+        stock = gym.make(STOCK_ID, render_mode=render_mode, **kwargs)
+        return stock, gym.make("CarRacing-v3", render_mode=render_mode, **kwargs)
 
 
-def assert_same_episode(seed: int, actions, render: bool = False, stock=None, fast=None, **kwargs) -> list:
+def assert_same_episode(seed: int, actions, render: bool = False, stock=None, fast=None, options=None,
+                        **kwargs) -> list:
     """Step both classes in lockstep; the stock transitions, for checks on what the episode did."""
     if stock is None:
         stock, fast = pair("rgb_array" if render else None, **kwargs)
-    stock_obs, stock_info = stock.reset(seed=seed)
-    fast_obs, fast_info = fast.reset(seed=seed)
+    stock_obs, stock_info = stock.reset(seed=seed, options=options)
+    fast_obs, fast_info = fast.reset(seed=seed, options=options)
     assert np.array_equal(stock_obs, fast_obs) and stock_info == fast_info
     transitions = []
     for step, action in enumerate(actions):
@@ -53,8 +56,8 @@ def constant(action, steps: int) -> list[np.ndarray]:
 
 
 def test_leaving_the_playfield_ends_with_minus_100_and_stepping_on_still_matches():
-    # gas 1.0 spins the rear wheels on the starting grass (the car stays on the playfield for 1000
-    # steps); 0.5 drives it straight out in about 200
+    # gas 1.0 alone spins the rear wheels and the car crawls (it is still on the playfield after
+    # 1000 steps); 0.5 drives it straight out in about 200 steps
     stock, fast = pair()
     transitions = assert_same_episode(11, constant([0.0, 1.0, 0.0], 30) + constant([0.0, 0.5, 0.0], 300),
                                       stock=stock, fast=fast)
@@ -99,8 +102,7 @@ def test_domain_randomisation_and_discrete_actions():
     rng = np.random.default_rng(17)
     stock, fast = pair(domain_randomize=True)
     assert_same_episode(17, rng.uniform([-1, 0, 0], [1, 1, 1], size=(50, 3)).astype(np.float32), stock=stock, fast=fast)
-    stock.reset(seed=18, options={"randomize": False}), fast.reset(seed=18, options={"randomize": False})
-    assert_same_episode(18, constant([0.0, 0.5, 0.0], 30), stock=stock, fast=fast)
+    assert_same_episode(18, constant([0.0, 0.5, 0.0], 30), stock=stock, fast=fast, options={"randomize": False})
     assert_same_episode(19, rng.integers(0, 5, size=50).tolist(), continuous=False)
 
 
@@ -117,8 +119,8 @@ def test_rotation_is_pygames_bit_for_bit():
 # --- the pieces, against pygame and Box2D themselves ---------------------------------------------
 
 PYGAME_DRAWING = {
-    "gfxdraw.aapolygon": (pygame.gfxdraw.aapolygon, pygame_raster.gfx_aapolygon),
-    "gfxdraw.filled_polygon": (pygame.gfxdraw.filled_polygon, pygame_raster.gfx_filled_polygon),
+    "gfxdraw.aapolygon": (gfxdraw.aapolygon, pygame_raster.gfx_aapolygon),
+    "gfxdraw.filled_polygon": (gfxdraw.filled_polygon, pygame_raster.gfx_filled_polygon),
     "draw.polygon": (lambda surface, points, color: pygame.draw.polygon(surface, color, points),
                      pygame_raster.draw_polygon),
 }
@@ -194,8 +196,8 @@ def test_a_covering_playfield_polygon_is_a_fill():
             continue
         covered += 1
         drawn = pygame.Surface((1000, 800))
-        pygame.gfxdraw.aapolygon(drawn, points, (102, 204, 102))
-        pygame.gfxdraw.filled_polygon(drawn, points, (102, 204, 102))
+        gfxdraw.aapolygon(drawn, points, (102, 204, 102))
+        gfxdraw.filled_polygon(drawn, points, (102, 204, 102))
         assert np.all(pygame.surfarray.pixels2d(drawn) == drawn.map_rgb((102, 204, 102)))
     assert covered >= 5
 
@@ -210,6 +212,17 @@ def test_project_ids_make_the_fast_class_and_the_stock_id_gymnasiums():
             assert type(env.unwrapped) is cls and recipe.name == "CarRacing"  # action squashing, early stop
         finally:
             env.close()
+
+
+@pytest.mark.parametrize("case", ["static pixels", "hebbian pixels"])
+def test_gymnasiums_class_trains_to_the_pinned_parameters_too(case, tmp_path):
+    """The pinned CarRacing runs (tests/test_pinned.py) now use the fast class; Gymnasium's gives the same θ."""
+    from tests.test_pinned import CASES, PINNED, parameters_hash, train
+
+    kind, argv = CASES[case]
+    argv = tuple(STOCK_ID if arg == "CarRacing-v3" else arg for arg in argv)
+    assert STOCK_ID in argv
+    assert parameters_hash(train(kind, tmp_path, *argv, "--threads", "1")) == PINNED[case]
 
 
 @pytest.mark.parametrize("env_id", ["CarRacing-v3", STOCK_ID])
