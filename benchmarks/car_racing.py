@@ -40,7 +40,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import envs  # noqa: E402  (headless defaults; CarRacing-v3 is the fast class)
 import gymnasium as gym  # noqa: E402
 from envs import ProblemSpec  # noqa: E402
-from envs.car_racing import STOCK_ID  # noqa: E402
+from envs.make import STOCK_CAR_RACING_ID as STOCK_ID  # noqa: E402
 from envs.wrappers import CarRacingAction, PixelObservation  # noqa: E402
 from es.evaluator import SerialEvaluator  # noqa: E402
 from es.noise import NoiseTable  # noqa: E402

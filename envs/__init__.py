@@ -14,7 +14,7 @@ if not os.environ.get("DISPLAY"):
 
 import gymnasium as gym  # noqa: E402
 
-from envs.make import EnvironmentError_, make_env, quiet_output, resolve_env_id  # noqa: E402
+from envs.make import EnvironmentError_, make_env, quiet_output, register_fast_car_racing, resolve_env_id  # noqa: E402
 from envs.problem import Problem, ProblemSpec  # noqa: E402
 from envs.recipes import Recipe, recipe_for, register_recipe  # noqa: E402
 from envs.rollout import Episode, episode_rng, rollout  # noqa: E402
@@ -27,10 +27,8 @@ with quiet_output():
         pass
 
 import envs.damaged  # noqa: E402,F401  (registers the damaged ants of Najarro & Risi 2020)
-try:
-    import envs.car_racing  # noqa: E402,F401  (CarRacing-v3 -> the fast class, CarRacingStock-v3 -> Gymnasium's)
-except (ImportError, gym.error.DependencyNotInstalled):  # Box2D or pygame missing: no CarRacing at all
-    pass
+
+register_fast_car_racing()
 
 __all__ = ["EnvironmentError_", "Episode", "Problem", "ProblemSpec", "Recipe", "episode_rng",
            "make_env", "quiet_output", "recipe_for", "register_recipe", "resolve_env_id", "rollout"]

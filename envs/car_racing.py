@@ -33,10 +33,8 @@ tile's colour array), so colours are read at every frame, never copied.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
-import gymnasium as gym
 import numpy as np
 import pygame
 from gymnasium.envs.box2d import car_dynamics
@@ -434,23 +432,3 @@ class FastCarRacing(stock.CarRacing):
         self._font = None  # a Font must not outlive pygame.quit(), which the stock close() may call
         self._score_text = None
         super().close()
-
-
-STOCK_ID = "CarRacingStock-v3"
-
-
-def register() -> None:
-    """``CarRacing-v3`` (so also the retired ``CarRacing-v0``) makes ``FastCarRacing``; ``STOCK_ID``
-    Gymnasium's class.
-
-    Idempotent. The stock id keeps every setting of Gymnasium's spec (time limit, reward threshold),
-    so a result can be checked against Gymnasium's own class with ``--environment CarRacingStock-v3``.
-    """
-    spec = gym.registry.get("CarRacing-v3")
-    if spec is None or STOCK_ID in gym.registry:
-        return
-    gym.registry[STOCK_ID] = dataclasses.replace(spec, id=STOCK_ID)
-    gym.registry["CarRacing-v3"] = dataclasses.replace(spec, entry_point=f"{__name__}:{FastCarRacing.__name__}")
-
-
-register()

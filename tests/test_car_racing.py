@@ -19,7 +19,8 @@ from pygame import gfxdraw
 
 import envs
 from envs import pygame_raster
-from envs.car_racing import STOCK_ID, FastCarRacing, box2d_transform, covers_screen, pygame_pixels, rotate_like_pygame
+from envs.car_racing import FastCarRacing, box2d_transform, covers_screen, pygame_pixels, rotate_like_pygame
+from envs.make import STOCK_CAR_RACING_ID as STOCK_ID
 from gymnasium.envs.box2d.car_racing import CarRacing, PLAYFIELD
 
 
