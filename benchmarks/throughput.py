@@ -5,6 +5,7 @@
     python benchmarks/throughput.py --environment HalfCheetah-v5 --policy hebbian --hebb_rule ABCD_lr
     python benchmarks/throughput.py --environment AntBulletEnv-v0 --policy static --scaling
     python benchmarks/throughput.py --environment ALE/Pong-v5 --network lstm
+    python benchmarks/throughput.py --environment CarRacing-v3 --policy hebbian
 
 The ratio compares, over the same episodes, the real evaluation path (the evaluator, its worker,
 the recipe's wrappers, the policy, the rollout) with ``env.step`` of a plain ``gym.make``
@@ -13,6 +14,9 @@ trajectories, so it isolates what the training loop adds (a simulator's step tim
 state: a policy that saturates its actions makes MuJoCo slower than random actions do). The two
 alternate episode by episode and are timed in CPU time of this process, so that the machine's
 drift (about +-40 % here) and other load cancel out; the median over rounds is printed.
+Resets are outside the raw side: on CarRacing, whose reset generates a track (about 10-20 ms) and
+whose generation-0 episodes stop after some 25 steps, that alone keeps the ratio well below the
+others' (``benchmarks/car_racing.py`` compares the loop with Gymnasium's class instead).
 --scaling compares generations with 1 and 2 worker processes, in wall time. Targets (issues 2, 3):
 static MLP on HalfCheetah-v5 >= 0.85, Hebbian ABCD_lr >= 0.70 on HalfCheetah-v5 and >= 0.90 on
 AntBulletEnv-v0 (--threads 1); 1 -> 2 workers on AntBulletEnv-v0 >= 1.8x (--scaling).
@@ -64,14 +68,19 @@ def training_rate(evaluator, theta: np.ndarray, sigma: float, tasks: np.ndarray)
 def record_actions(evaluator: SerialEvaluator, theta: np.ndarray, sigma: float, tasks: np.ndarray,
                    preprocessed: bool):
     """The (seed, actions) of every episode of ``tasks``, as the bare environment (or, ``preprocessed``,
-    the environment below the action mapping) received them; and the policy's CPU seconds per step."""
+    the environment below the action mapping) received them; and the policy's CPU seconds per step.
+
+    A ``step(None)`` is not an action: CarRacing's ``reset`` makes one itself to draw the first
+    frame, and ``replay`` reproduces it by resetting.
+    """
     problem = evaluator._worker.problem
     base = problem.envs[0].env if preprocessed else problem.envs[0].unwrapped
     episodes, step, act = [], base.step, problem.policy.act
     acting = [0.0, 0]
 
     def recording_step(action):
-        episodes[-1][1].append(np.array(action, copy=True))
+        if action is not None:
+            episodes[-1][1].append(np.array(action, copy=True))
         return step(action)
 
     def timed_act(params, state, obs):

@@ -1,8 +1,10 @@
 """Environments: construction, per-family recipes, wrappers, damaged morphologies, the rollout.
 
 Importing this package lets pygame run without a display (unless the user chose a video driver),
-and registers the pyBullet environments and the damaged ants with Gymnasium. MuJoCo's GL backend is
-left alone: training never renders, and ``envs.headless`` chooses one when frames are asked for.
+registers the pyBullet environments and the damaged ants with Gymnasium, and makes ``CarRacing-v3``
+the fast, pixel-identical ``envs.car_racing.FastCarRacing`` (Gymnasium's own class stays available as
+``CarRacingStock-v3``). MuJoCo's GL backend is left alone: training never renders, and
+``envs.headless`` chooses one when frames are asked for.
 """
 
 import os
@@ -12,7 +14,7 @@ if not os.environ.get("DISPLAY"):
 
 import gymnasium as gym  # noqa: E402
 
-from envs.make import EnvironmentError_, make_env, quiet_output, resolve_env_id  # noqa: E402
+from envs.make import EnvironmentError_, make_env, quiet_output, register_fast_car_racing, resolve_env_id  # noqa: E402
 from envs.problem import Problem, ProblemSpec  # noqa: E402
 from envs.settings import EnvSettings  # noqa: E402
 from envs.recipes import Recipe, custom_recipe_modules, recipe_for, register_recipe  # noqa: E402
@@ -26,6 +28,8 @@ with quiet_output():
         pass
 
 import envs.damaged  # noqa: E402,F401  (registers the damaged ants of Najarro & Risi 2020)
+
+register_fast_car_racing()
 
 __all__ = ["EnvSettings", "EnvironmentError_", "Episode", "Problem", "ProblemSpec", "Recipe", "episode_rng",
            "custom_recipe_modules", "make_env", "quiet_output", "recipe_for", "register_recipe", "resolve_env_id",

@@ -1,4 +1,5 @@
-"""Environment construction: id resolution, aliases of retired ids, the family recipe, warm-up.
+"""Environment construction: id resolution, aliases of retired ids, the fast CarRacing's ids, the
+family recipe, warm-up.
 
 ``make_env`` is the only place an environment is created, for training, evaluation, benchmarks
 and tests alike.
@@ -8,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import dataclasses
 import difflib
 import importlib
 import os
@@ -20,8 +22,26 @@ from envs import atari
 from envs.recipes import Recipe, recipe_for
 
 
+STOCK_CAR_RACING_ID = "CarRacingStock-v3"
+
+
 class EnvironmentError_(ValueError):
     """An environment id that cannot be made; the message names close matches."""
+
+
+def register_fast_car_racing() -> None:
+    """``CarRacing-v3`` (so the retired ``CarRacing-v0`` too) makes ``envs.car_racing.FastCarRacing``,
+    Gymnasium's class drawn faster with the same frames (issue 9); ``CarRacingStock-v3`` makes
+    Gymnasium's own class with the same spec, to check any result against it.
+
+    Idempotent. Nothing is imported here: the fast class's module (Box2D, pygame, numba kernels)
+    loads when a CarRacing is made.
+    """
+    spec = gym.registry.get("CarRacing-v3")
+    if spec is None or STOCK_CAR_RACING_ID in gym.registry:
+        return
+    gym.registry[STOCK_CAR_RACING_ID] = dataclasses.replace(spec, id=STOCK_CAR_RACING_ID)
+    gym.registry["CarRacing-v3"] = dataclasses.replace(spec, entry_point="envs.car_racing:FastCarRacing")
 
 
 def _usable(spec) -> bool:

@@ -4,7 +4,7 @@
   (act with the current weights, update each layer from its own pre/post activities, normalise);
 - a Hebbian net with zero coefficients acts exactly like the static net on the same weights;
 - the static flat vector is PyTorch's ``parameters_to_vector`` order of the original modules (MLP and
-  CNN), checked against a torch forward pass;
+  CNN), checked against a torch forward pass; the CNN's pooling is torch's, bit for bit;
 - the ``--init_weights`` distributions of spec §4.4, per-episode reproducibility;
 - the parameter counts of spec §3.2, the named layout, and export/load in the original shapes.
 """
@@ -190,6 +190,23 @@ def test_static_cnn_vector_is_torch_parameter_order():
         output, state = policy.act(vector, state, obs)
         np.testing.assert_allclose(output, expected, rtol=1e-4, atol=1e-6)
 
+
+
+@pytest.mark.parametrize("shape", [(6, 82, 82), (8, 19, 19)])
+def test_max_pool2_is_torchs_max_pool2d_bit_for_bit(shape):
+    """The CNN's pooling (policies/conv.py) must not move a bit: signed zeros, NaN payloads, infinities."""
+    from policies.conv import max_pool2
+
+    rng = np.random.default_rng(sum(shape))
+    planes = rng.normal(size=shape).astype(np.float32)
+    flat = planes.reshape(-1)
+    special = rng.choice(flat.size, size=flat.size // 2, replace=False)
+    flat[special] = rng.choice(np.array([0.0, -0.0, np.inf, -np.inf, np.nan, 1.0], dtype=np.float32), size=special.size)
+    nans = np.flatnonzero(np.isnan(flat))
+    flat.view(np.uint32)[nans] |= rng.integers(1, 1 << 22, size=nans.size).astype(np.uint32)  # distinct payloads
+    with torch.inference_mode():
+        expected = nn.functional.max_pool2d(torch.from_numpy(planes)[None], 2)[0].numpy()
+    assert np.array_equal(max_pool2(planes).view(np.uint32), expected.view(np.uint32))
 
 # --- (d) --init_weights distributions (spec §4.4) --------------------------------------------------
 

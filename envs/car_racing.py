@@ -1,0 +1,434 @@
+"""CarRacing whose frames are Gymnasium's, bit for bit, computed several times faster (issue 9).
+
+Gymnasium's ``CarRacing`` (O. Klimov; ``gymnasium/envs/box2d/car_racing.py``, v3) draws the whole
+picture at every step, because the observation is that picture. Most of its time goes to
+``_render_road``: about 800 road and grass polygons are rotated vertex by vertex with
+``pygame.math.Vector2.rotate_rad``, tested for visibility in Python, and about 60 of them drawn.
+``FastCarRacing`` keeps the physics, the track generation and their random-number use (it does not
+touch them) and computes the same picture with less work:
+
+- the polygons are transformed in numpy with pygame's own arithmetic (``rotate_like_pygame``), so
+  every vertex is the same double as pygame's, and culled with the same inclusive bounds; those
+  that pass that generous test but lie wholly beyond one side of the screen are not drawn (pygame
+  would clip every one of their pixels away);
+- the playfield polygon, when it covers the screen with its edges out of sight, is a fill of the
+  pixel pygame would write;
+- for observations (``state_pixels``), the road, the grass and the car are drawn by
+  ``envs.pygame_raster``, pygame's own polygon algorithms compiled with numba, straight into the
+  flipped frame (no flip of the 1000 x 800 picture), in the stock order; the car's corners come
+  from Box2D's transform computed in float32 as Box2D does (``box2d_transform``). The dashboard
+  and the score are still drawn by pygame, and the picture is shrunk by pygame's ``smoothscale``;
+- video frames (``rgb_array``, ``human``), which also draw the skid marks, and any frame the
+  compiled drawing cannot promise to reproduce (a coordinate beyond +-16383, a colour that is not
+  plain RGB, a surface that is not 32-bit XRGB), go through pygame's own drawing calls, fewer of
+  them, on reused surfaces;
+- the font and the rendered score text are made once instead of at every frame.
+
+Observations and ``render()`` frames are ``np.array_equal`` to the stock class's:
+``tests/test_car_racing.py`` checks the environment side by side with Gymnasium's class and each
+compiled function against pygame on random polygons, and ``benchmarks/car_racing.py --identity``
+runs longer episodes. Visited tiles change colour in place (``road_poly`` holds a reference to each
+tile's colour array), so colours are read at every frame, never copied.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pygame
+from gymnasium.envs.box2d import car_dynamics
+from gymnasium.envs.box2d import car_racing as stock
+from pygame import gfxdraw
+
+from envs import pygame_raster
+
+_W, _H = stock.WINDOW_W, stock.WINDOW_H
+_CULL_MARGIN = stock.MAX_SHAPE_DIM
+# pygame's Vector2 (src_c/math.c, _vector2_rotate_helper): its default epsilon for right angles
+_PYGAME_VECTOR_EPSILON = 1e-6
+# the playfield is a fill only if the screen, grown by this many pixels, is inside it: the edges'
+# anti-aliased pixels and the scanline rounding stay within one pixel of the edge
+_FILL_MARGIN = 3
+# |coordinate| below this: its integer is within what envs.pygame_raster reproduces
+_COMPILED_BOUND = pygame_raster.LARGEST_COORDINATE + 1
+_STATE_MODES = ("state_pixels", "state_pixels_list")
+
+
+def _rotated(x: np.ndarray, y: np.ndarray, angle: float) -> tuple[np.ndarray, np.ndarray]:
+    angle = math.fmod(angle, 2 * math.pi)
+    if angle < 0:
+        angle += 2 * math.pi
+    epsilon = _PYGAME_VECTOR_EPSILON
+    if math.fmod(angle + epsilon, math.pi / 2) < 2 * epsilon:
+        quarter_turns = int((angle + epsilon) / (math.pi / 2)) % 4
+        return [(x, y), (-y, x), (-x, -y), (y, -x)][quarter_turns]
+    sine, cosine = math.sin(angle), math.cos(angle)
+    return cosine * x - sine * y, sine * x + cosine * y
+
+
+def rotate_like_pygame(points: np.ndarray, angle: float) -> np.ndarray:
+    """``Vector2(p).rotate_rad(angle)`` for every row ``p`` of ``points`` (..., 2), bit for bit.
+
+    pygame-ce (``src_c/math.c``) reduces the angle with ``fmod`` to [0, 2 pi), swaps coordinates
+    exactly at multiples of pi/2 (within 1e-6), and otherwise computes ``cos*x - sin*y``,
+    ``sin*x + cos*y`` in doubles; ``math.sin``/``math.cos`` call the same C library.
+    """
+    return np.stack(_rotated(points[..., 0], points[..., 1], angle), axis=-1)
+
+
+def to_screen(corners: np.ndarray, zoom: float, translation, angle: float) -> np.ndarray:
+    """The stock ``_draw_colored_polygon``'s pixel coordinates: rotated, then ``c * zoom + t``."""
+    rotated_x, rotated_y = _rotated(corners[..., 0], corners[..., 1], angle)
+    screen = np.empty(corners.shape)
+    screen[..., 0] = rotated_x * zoom + translation[0]
+    screen[..., 1] = rotated_y * zoom + translation[1]
+    return screen
+
+
+def pygame_pixels(screen: np.ndarray) -> np.ndarray | None:
+    """The Sint16 vertices pygame's gfxdraw makes of these coordinates (``int()``, then a cast).
+
+    None when a coordinate is not finite or too large for that conversion to be reproduced here;
+    the caller then leaves every decision to pygame.
+    """
+    if not np.all(np.abs(screen) < 2.0 ** 31):  # also False for NaN
+        return None
+    return np.trunc(screen).astype(np.int64).astype(np.int16).astype(np.int64)
+
+
+def touches_screen(pixels: np.ndarray) -> np.ndarray:
+    """Per polygon (..., corners, 2): can gfxdraw's filled or anti-aliased polygon write a pixel?
+
+    Both clip to the surface: a polygon whose integer bounding box lies wholly beyond one side of
+    the screen writes nothing (every scanline is outside, every edge is rejected by the line clip).
+    """
+    low, high = pixels.min(axis=-2), pixels.max(axis=-2)
+    return (high[..., 0] >= 0) & (low[..., 0] <= _W - 1) & (high[..., 1] >= 0) & (low[..., 1] <= _H - 1)
+
+
+def covers_screen(pixels: np.ndarray) -> bool:
+    """Does this convex quadrilateral (4, 2) of integer vertices contain the screen with a margin?"""
+    low, high = -_FILL_MARGIN, _FILL_MARGIN
+    corners = ((low, low), (_W - 1 + high, low), (_W - 1 + high, _H - 1 + high), (low, _H - 1 + high))
+    signs = set()
+    for index in range(4):
+        (x1, y1), (x2, y2) = pixels[index - 1].tolist(), pixels[index].tolist()
+        for x, y in corners:
+            cross = (x2 - x1) * (y - y1) - (y2 - y1) * (x - x1)
+            if cross == 0:
+                return False
+            signs.add(cross > 0)
+    return len(signs) == 1
+
+
+def box2d_transform(cos_sin_position: np.ndarray, local: np.ndarray) -> np.ndarray:
+    """``b2Transform * b2Vec2`` of pybox2d for rows of (cos, sin, x, y) and of local points, bit for bit.
+
+    Box2D's ``b2Mul(T, v)`` (``Box2D/Common/b2Math.h``) is ``(c vx - s vy) + px``, ``(s vx + c vy)
+    + py`` in float32, one rounding per operation, which is what float32 numpy arrays do.
+    """
+    c, s, px, py = (cos_sin_position[:, i] for i in range(4))
+    vx, vy = local[:, 0], local[:, 1]
+    return np.stack(((c * vx - s * vy) + px, (s * vx + c * vy) + py), axis=-1).astype(np.float64)
+
+
+def _wheel_mark(phase: float) -> list | None:
+    """The white mark of a wheel turned by ``phase``, in the wheel's frame, or None when hidden:
+    ``Car.draw``'s own expressions (numpy's sign included), so that Box2D would get the same floats."""
+    a1, a2 = phase, phase + 1.2  # radians
+    s1, s2, c1, c2 = math.sin(a1), math.sin(a2), math.cos(a1), math.cos(a2)
+    if s1 > 0 and s2 > 0:
+        return None
+    if s1 > 0:
+        c1 = np.sign(c1)
+    if s2 > 0:
+        c2 = np.sign(c2)
+    width, radius, size = car_dynamics.WHEEL_W, car_dynamics.WHEEL_R, car_dynamics.SIZE
+    return [(-width * size, +radius * c1 * size), (+width * size, +radius * c1 * size),
+            (+width * size, +radius * c2 * size), (-width * size, +radius * c2 * size)]
+
+
+def _grass_corners() -> np.ndarray:
+    """The stock ``_render_road``'s grass squares, with its own float expressions."""
+    dim = stock.GRASS_DIM
+    return np.array([[(dim * x + dim, dim * y + 0), (dim * x + 0, dim * y + 0),
+                      (dim * x + 0, dim * y + dim), (dim * x + dim, dim * y + dim)]
+                     for x in range(-20, 20, 2) for y in range(-20, 20, 2)], dtype=np.float64)
+
+
+def _playfield_corners() -> np.ndarray:
+    bound = stock.PLAYFIELD
+    return np.array([(bound, bound), (bound, -bound), (-bound, -bound), (-bound, bound)], dtype=np.float64)
+
+
+class FastCarRacing(stock.CarRacing):
+    """Gymnasium's CarRacing with the same observations and frames, drawn with less work.
+
+    Every constructor argument, ``reset`` option and attribute is the stock class's; only the
+    drawing methods are replaced. ``self.surf`` is, as in the stock class, the last frame at full
+    size (here a surface reused from frame to frame). Observations are C-contiguous arrays (the
+    stock class returns a transposed view); their values are the same.
+    """
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._frame: pygame.Surface | None = None  # the picture, flipped: stock's self.surf
+        self._canvas: pygame.Surface | None = None  # the pygame path's unflipped picture
+        self._probe: pygame.Surface | None = None
+        self._scaled: dict[tuple[int, int], pygame.Surface] = {}
+        self._compiled_drawing = False
+        self._font: pygame.font.Font | None = None
+        self._score_text: tuple[str, pygame.Surface, pygame.Rect] | None = None
+        self._road_source: list | None = None
+        self._world_corners = np.empty((0, 4, 2))
+        self._road_colors: list = []
+        self._car_source: car_dynamics.Car | None = None
+        self._car_fixtures: list[tuple[int, np.ndarray]] = []
+        self._grass_corners = _grass_corners()
+        self._playfield = _playfield_corners()
+
+    # --- one frame ---------------------------------------------------------------------------
+
+    def _render(self, mode: str):
+        assert mode in self.metadata["render_modes"]
+        pygame.font.init()
+        if self.screen is None and mode == "human":
+            pygame.display.init()
+            self.screen = pygame.display.set_mode((_W, _H))
+        if self.clock is None:
+            self.clock = pygame.time.Clock()
+        if "t" not in self.__dict__:
+            return None  # reset() not called yet
+        self._make_surfaces()
+        camera = self._camera()
+        if mode not in _STATE_MODES or not self._draw_compiled(*camera):
+            self._draw_with_pygame(*camera, draw_particles=mode not in _STATE_MODES)
+        self.surf = self._frame
+        self._render_indicators(_W, _H)
+        self._draw_score()
+        if mode == "human":
+            pygame.event.pump()
+            self.clock.tick(self.metadata["render_fps"])
+            assert self.screen is not None
+            self.screen.fill(0)
+            self.screen.blit(self.surf, (0, 0))
+            pygame.display.flip()
+            return None
+        if mode == "rgb_array":
+            return self._create_image_array(self.surf, (stock.VIDEO_W, stock.VIDEO_H))
+        if mode == "state_pixels":
+            return self._create_image_array(self.surf, (stock.STATE_W, stock.STATE_H))
+        return self.isopen
+
+    def _make_surfaces(self) -> None:
+        if self._frame is not None:
+            return
+        self._frame = pygame.Surface((_W, _H))
+        self._canvas = pygame.Surface((_W, _H))
+        self._probe = pygame.Surface((1, 1))
+        # the compiled drawing writes 32-bit XRGB pixels into rows of exactly the surface's width
+        self._compiled_drawing = (self._frame.get_bitsize() == 32 and self._frame.get_pitch() == 4 * _W
+                                  and self._frame.get_masks() == (0xFF0000, 0xFF00, 0xFF, 0)
+                                  and self._frame.map_rgb((1, 2, 3)) == 0x010203)
+
+    def _camera(self) -> tuple[float, tuple[float, float], float]:
+        """Zoom, translation and angle of the stock ``_render``, computed as it does."""
+        assert self.car is not None
+        angle = -self.car.hull.angle
+        # animating the first second's zoom
+        zoom = 0.1 * stock.SCALE * max(1 - self.t, 0) + stock.ZOOM * stock.SCALE * min(self.t, 1)
+        scroll_x = -(self.car.hull.position[0]) * zoom
+        scroll_y = -(self.car.hull.position[1]) * zoom
+        trans = pygame.math.Vector2((scroll_x, scroll_y)).rotate_rad(angle)
+        return zoom, (_W / 2 + trans[0], _H / 4 + trans[1]), angle
+
+    def _draw_score(self) -> None:
+        """The stock score text, rendered once per distinct string with one Font."""
+        if self._font is None:
+            self._font = pygame.font.Font(pygame.font.get_default_font(), 42)
+        text = f"{self.reward:04.0f}"
+        if self._score_text is None or self._score_text[0] != text:
+            image = self._font.render(text, True, (255, 255, 255), (0, 0, 0))
+            rect = image.get_rect()
+            rect.center = (60, _H - _H * 2.5 / 40.0)
+            self._score_text = (text, image, rect)
+        self.surf.blit(self._score_text[1], self._score_text[2])
+
+    def _create_image_array(self, screen, size):
+        """The stock ``smoothscale`` into a reused surface; its pixels read as (height, width, RGB)."""
+        scaled = self._scaled.get(size)
+        if scaled is None:
+            scaled = self._scaled[size] = pygame.Surface(size)
+        pygame.transform.smoothscale(screen, size, scaled)
+        rgb = bytearray(pygame.image.tobytes(scaled, "RGB"))
+        return np.frombuffer(rgb, dtype=np.uint8).reshape(size[1], size[0], 3)
+
+    # --- what is drawn -------------------------------------------------------------------------
+
+    def _world_polygons(self) -> np.ndarray:
+        """Grass then road corners (K, 4, 2); ``self._road_colors`` the road's colours, live references."""
+        road_poly = self.road_poly
+        if self._road_source is not road_poly or len(self._world_corners) != len(self._grass_corners) + len(road_poly):
+            road = np.array([poly for poly, _ in road_poly], dtype=np.float64).reshape(-1, 4, 2)
+            self._world_corners = np.concatenate([self._grass_corners, road])
+            self._road_colors = [color for _, color in road_poly]  # never copies: visited tiles change
+            self._road_source = road_poly
+        return self._world_corners
+
+    def _visible_polygons(self, zoom, translation, angle) -> tuple[np.ndarray, np.ndarray]:
+        """Indices into grass-then-road of the polygons to draw, and their screen corners (n, 4, 2).
+
+        The stock test first (some corner within ``MAX_SHAPE_DIM`` of the screen), then the exact
+        one: pygame would clip away every pixel of a polygon wholly beyond one side of the screen.
+        """
+        screen = to_screen(self._world_polygons(), zoom, translation, angle)
+        x, y = screen[..., 0], screen[..., 1]
+        inside = (x >= -_CULL_MARGIN) & (x <= _W + _CULL_MARGIN) & (y >= -_CULL_MARGIN) & (y <= _H + _CULL_MARGIN)
+        drawn = np.flatnonzero(inside.any(axis=1))
+        pixels = pygame_pixels(screen[drawn])
+        if pixels is not None:
+            drawn = drawn[touches_screen(pixels)]
+        return drawn, screen[drawn]
+
+    def _polygon_color(self, index: int):
+        """The colour the stock ``_render_road`` passes for polygon ``index`` of grass-then-road."""
+        grass = len(self._grass_corners)
+        if index < grass:
+            return self.grass_color
+        return [int(c) for c in self._road_colors[index - grass]]
+
+    def _gfx_pixel(self, color) -> int:
+        """The pixel value gfxdraw writes for ``color``, as it parses it (arrays of floats included)."""
+        self._probe.fill(0)
+        gfxdraw.hline(self._probe, 0, 0, 0, color)
+        return self._probe.get_at_mapped((0, 0))
+
+    # --- pygame's drawing ----------------------------------------------------------------------
+
+    def _draw_with_pygame(self, zoom, translation, angle, draw_particles: bool) -> None:
+        """The stock drawing calls, fewer of them, on the canvas; then flipped into the frame."""
+        self.surf = self._canvas
+        self._render_road(zoom, translation, angle)
+        self.car.draw(self._canvas, zoom, translation, angle, draw_particles)
+        source = pygame.surfarray.pixels2d(self._canvas)
+        target = pygame.surfarray.pixels2d(self._frame)
+        target[...] = source[:, ::-1]  # pygame.transform.flip(canvas, False, True), without a new surface
+        del source, target  # release the surfaces' locks before anything blits onto them
+
+    def _render_road(self, zoom, translation, angle):
+        self._draw_playfield(zoom, translation, angle)
+        drawn, screen = self._visible_polygons(zoom, translation, angle)
+        for index, points in zip(drawn.tolist(), screen.tolist()):
+            color = self._polygon_color(index)
+            gfxdraw.aapolygon(self.surf, points, color)
+            gfxdraw.filled_polygon(self.surf, points, color)
+
+    def _draw_playfield(self, zoom, translation, angle) -> None:
+        """The background: a fill when the playfield polygon covers the screen, else pygame's polygon."""
+        screen = to_screen(self._playfield, zoom, translation, angle)
+        pixels = pygame_pixels(screen)
+        if pixels is not None and covers_screen(pixels):
+            self.surf.fill(self._gfx_pixel(self.bg_color))
+            return
+        self.surf.fill(0)  # a new stock surface is black
+        points = screen.tolist()
+        gfxdraw.aapolygon(self.surf, points, self.bg_color)
+        gfxdraw.filled_polygon(self.surf, points, self.bg_color)
+
+    # --- the compiled drawing ------------------------------------------------------------------
+
+    def _draw_compiled(self, zoom, translation, angle) -> bool:
+        """The world straight into the flipped frame by ``envs.pygame_raster``; False, having drawn
+        nothing, where that cannot be guaranteed to match pygame (then pygame draws it)."""
+        if not self._compiled_drawing:
+            return False
+        playfield = to_screen(self._playfield, zoom, translation, angle)
+        pixels = pygame_pixels(playfield)
+        covered = pixels is not None and covers_screen(pixels)
+        drawn, world = self._visible_polygons(zoom, translation, angle)
+        car_corners, car_counts, car_colors = self._car_polygons(zoom, translation, angle)
+        world_colors = self._world_pixel_values(drawn)
+        background = self._plain_pixel(self.bg_color)
+        if world_colors is None or background is None or None in car_colors or min(car_counts) < 4:
+            return False  # (pygame draws triangles with another algorithm)
+        parts = [world.reshape(-1, 2), car_corners] if covered else [playfield, world.reshape(-1, 2), car_corners]
+        corners = np.concatenate(parts)
+        if not np.all(np.abs(corners) < _COMPILED_BOUND):  # also False for NaN
+            return False
+        smooth = len(drawn) + (not covered)
+        colors = np.concatenate([world_colors if covered else [background, *world_colors], car_colors])
+        starts = np.cumsum([0] + [4] * smooth + car_counts)
+        integers = np.trunc(corners).astype(np.int64)
+        self._frame.fill(background if covered else 0)  # a new stock surface is black
+        frame = pygame.surfarray.pixels2d(self._frame).T  # (height, width) view of the frame's pixels
+        pygame_raster.draw_polygons(frame, True, integers[:, 0].copy(), integers[:, 1].copy(), starts,
+                                    colors.astype(np.int64), np.arange(len(colors)) < smooth)
+        del frame  # release the surface's lock before anything blits onto it
+        return True
+
+    def _plain_pixel(self, color) -> int | None:
+        """The pixel gfxdraw writes for ``color`` if it is an opaque RGB colour; None if it would blend."""
+        return self._gfx_pixel(color) if len(color) == 3 else None
+
+    def _world_pixel_values(self, drawn: np.ndarray) -> np.ndarray | None:
+        """Pixel values of the grass and road polygons ``drawn``: None where one colour is not a
+        plain RGB triple within 0..255 (pygame would reject it, or blend)."""
+        grass_count = len(self._grass_corners)
+        is_grass = drawn < grass_count
+        values = np.empty(len(drawn), dtype=np.int64)
+        if is_grass.any():
+            grass = self._plain_pixel(self.grass_color)
+            if grass is None:
+                return None
+            values[is_grass] = grass
+        road = [self._road_colors[index] for index in (drawn[~is_grass] - grass_count).tolist()]
+        if road:
+            try:
+                colors = np.array(road, dtype=np.float64)  # read now: visited tiles change colour
+            except (TypeError, ValueError):
+                return None
+            if colors.shape != (len(road), 3) or not np.all((colors > -1) & (colors < 256)):  # NaN too
+                return None
+            rgb = np.trunc(colors).astype(np.int64)  # the stock's int(c): 0..255
+            values[~is_grass] = (rgb[:, 0] << 16) | (rgb[:, 1] << 8) | rgb[:, 2]  # XRGB8888 (_make_surfaces)
+        return values
+
+    def _car_polygons(self, zoom, translation, angle) -> tuple[np.ndarray, list[int], list[int | None]]:
+        """Screen corners (one polygon after the other), corner counts and pixel values of the car,
+        in ``Car.draw``'s order (``gymnasium/envs/box2d/car_dynamics.py``; no skid marks): each
+        body's fixtures, a wheel's white mark right after it."""
+        if self._car_source is not self.car:
+            bodies = self.car.drawlist
+            self._car_fixtures = [(bodies.index(fixture.body), np.array(fixture.shape.vertices, dtype=np.float32))
+                                  for body in bodies for fixture in body.fixtures]
+            self._car_source = self.car
+        poses = [(body.transform, body) for body in self.car.drawlist]
+        pose_rows = np.array([(t.q.c, t.q.s, t.position[0], t.position[1]) for t, _ in poses], dtype=np.float32)
+        colors = [self._draw_pixel([int(c * 255) for c in body.color]) for body in self.car.drawlist]
+        white = self._draw_pixel(list(car_dynamics.WHEEL_WHITE))
+        local, owners, counts, values = [], [], [], []
+        for body_index, vertices in self._car_fixtures:
+            polygons = [(vertices, colors[body_index])]
+            body = poses[body_index][1]
+            if "phase" in body.__dict__ and (mark := _wheel_mark(body.phase)) is not None:
+                polygons.append((np.array(mark, dtype=np.float32), white))
+            for points, value in polygons:
+                local.append(points)
+                owners += [body_index] * len(points)
+                counts.append(len(points))
+                values.append(value)
+        world = box2d_transform(pose_rows[owners], np.concatenate(local))
+        return to_screen(world, zoom, translation, angle), counts, values
+
+    @staticmethod
+    def _draw_pixel(color: list) -> int | None:
+        """The pixel ``pygame.draw`` writes for a colour of three ints (XRGB8888), None for others."""
+        if len(color) == 3 and all(isinstance(c, int) and 0 <= c <= 255 for c in color):
+            return (color[0] << 16) | (color[1] << 8) | color[2]
+        return None
+
+    def close(self):
+        self._font = None  # a Font must not outlive pygame.quit(), which the stock close() may call
+        self._score_text = None
+        super().close()

@@ -1,0 +1,287 @@
+"""pygame-ce's polygon drawing, reproduced pixel for pixel in numba, for the fast CarRacing (issue 9).
+
+CarRacing draws its picture with three pygame-ce 2.5 functions; this module computes the same
+pixels with the same integer and float32 arithmetic, without crossing the interpreter per polygon:
+
+- ``pygame.gfxdraw.filled_polygon``: SDL_gfx's ``filledPolygonColorMT`` (``src_c/SDL_gfx/
+  SDL_gfxPrimitives.c``), a scanline fill whose crossings are 16.16 fixed point;
+- ``pygame.gfxdraw.aapolygon``: SDL_gfx's ``aapolygonColor``, one ``_aalineColor`` per edge: the line
+  clipped to the surface (``_clipLine``, float32 slopes), then Wu's algorithm, each pixel blended
+  by ``_putPixelAlpha`` (the ``DEFAULT_ALPHA_PIXEL_ROUTINE``, 32-bit unsigned arithmetic);
+- ``pygame.draw.polygon`` (filled): pygame's ``draw_fillpoly`` (``src_c/draw.c``), a scanline fill
+  with float32 crossings and a second pass for horizontal edges.
+
+Pixels are written into a (height, width) uint32 array of an XRGB8888 surface (a no-alpha 32-bit
+surface, the kind ``pygame.Surface((w, h))`` makes), with the surface as the clipping rectangle;
+``flip`` writes row ``height - 1 - y`` instead of ``y``, which is ``pygame.transform.flip(surface,
+False, True)`` of what pygame would have drawn. Vertices are the integers pygame makes of float
+coordinates (truncation), and must lie within +-16383 so that no 32-bit intermediate overflows;
+colours are mapped pixel values. No ``fastmath``: float32 operations must round as pygame's do.
+``tests/test_car_racing.py`` compares every function with pygame itself on random polygons.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+_FLAGS = dict(cache=True, nogil=True)
+_U32 = 0xFFFFFFFF
+_RED, _GREEN, _BLUE = 0xFF0000, 0x00FF00, 0x0000FF
+LARGEST_COORDINATE = 16383  # 65536 * (x2 - x1) stays within a C int
+
+
+@njit(**_FLAGS)
+def _row(pixels, flip, y):
+    return pixels.shape[0] - 1 - y if flip else y
+
+
+@njit(**_FLAGS)
+def _blend_channel(old, new, mask, shift, alpha):
+    """One channel of SDL_gfx's ``_putPixelAlpha`` on a 32-bit surface, unsigned wrap-around included."""
+    difference = ((new & mask) - (old & mask)) & _U32
+    change = ((((difference >> shift) * alpha) & _U32) >> 8 << shift) & _U32
+    return ((old & mask) + change) & mask
+
+
+@njit(**_FLAGS)
+def _blend_pixel(pixels, flip, x, y, color, alpha):
+    """``_putPixelAlpha``: clipped; written as is at alpha 255, blended below (the surface has no alpha)."""
+    if x < 0 or x >= pixels.shape[1] or y < 0 or y >= pixels.shape[0]:
+        return
+    row = _row(pixels, flip, y)
+    if alpha == 255:
+        pixels[row, x] = color
+        return
+    old = np.int64(pixels[row, x])
+    pixels[row, x] = (_blend_channel(old, color, _RED, 16, alpha) | _blend_channel(old, color, _GREEN, 8, alpha)
+                      | _blend_channel(old, color, _BLUE, 0, alpha))
+
+
+@njit(**_FLAGS)
+def _gfx_hline(pixels, flip, x1, x2, y, color):
+    """SDL_gfx's ``hlineColor`` at alpha 255: ends in either order, both included, clipped."""
+    if x1 > x2:
+        x1, x2 = x2, x1
+    width, height = pixels.shape[1], pixels.shape[0]
+    if x2 < 0 or x1 > width - 1 or y < 0 or y > height - 1:
+        return
+    pixels[_row(pixels, flip, y), max(x1, 0):min(x2, width - 1) + 1] = color
+
+
+@njit(**_FLAGS)
+def _gfx_vline(pixels, flip, x, y1, y2, color):
+    """SDL_gfx's ``vlineColor`` at alpha 255."""
+    if y1 > y2:
+        y1, y2 = y2, y1
+    if x < 0 or x > pixels.shape[1] - 1 or y2 < 0 or y1 > pixels.shape[0] - 1:
+        return
+    for y in range(max(y1, 0), min(y2, pixels.shape[0] - 1) + 1):
+        pixels[_row(pixels, flip, y), x] = color
+
+
+@njit(**_FLAGS)
+def _sort(values, count):
+    """Sort ``values[:count]`` in place (a handful of crossings: insertion sort, no allocation)."""
+    for i in range(1, count):
+        value, j = values[i], i - 1
+        while j >= 0 and values[j] > value:
+            values[j + 1] = values[j]
+            j -= 1
+        values[j + 1] = value
+
+
+@njit(**_FLAGS)
+def _row_crossings(xs, ys, y, high, crossings, gfx):
+    """Where row ``y`` crosses the polygon's edges, sorted, in ``crossings``; their number.
+
+    Both scanline fills take an edge from its upper corner, skip horizontal ones, count an edge for
+    y1 <= y < y2 and, on the last row, for y == y2. SDL_gfx (``gfx``) keeps the crossing in 16.16
+    fixed point; pygame's ``draw_fillpoly`` divides in float32 and rounds alternately down and up.
+    """
+    found = 0
+    for i in range(xs.shape[0]):
+        previous = xs.shape[0] - 1 if i == 0 else i - 1
+        x1, y1, x2, y2 = xs[previous], ys[previous], xs[i], ys[i]
+        if y1 > y2:
+            x1, y1, x2, y2 = x2, y2, x1, y1
+        if y1 == y2 or not ((y1 <= y < y2) or (y == high and y == y2)):
+            continue
+        if gfx:
+            crossings[found] = (65536 * (y - y1)) // (y2 - y1) * (x2 - x1) + 65536 * x1
+        else:
+            crossing = np.float32((y - y1) * (x2 - x1)) / np.float32(y2 - y1)
+            crossings[found] = (math.floor(crossing) if found % 2 == 0 else math.ceil(crossing)) + x1
+        found += 1
+    _sort(crossings, found)
+    return found
+
+
+@njit(**_FLAGS)
+def gfx_filled_polygon(pixels, flip, xs, ys, color):
+    """``pygame.gfxdraw.filled_polygon`` (SDL_gfx ``filledPolygonColorMT``) of integer vertices."""
+    count = xs.shape[0]
+    low, high = ys.min(), ys.max()
+    crossings = np.empty(count, dtype=np.int64)
+    # rows off the surface draw nothing: skip them instead of scanning them
+    for y in range(max(low, 0), min(high, pixels.shape[0] - 1) + 1):
+        found = _row_crossings(xs, ys, y, high, crossings, True)
+        for i in range(0, found - 1, 2):
+            left = crossings[i] + 1
+            left = (left >> 16) + ((left & 32768) >> 15)
+            right = crossings[i + 1] - 1
+            right = (right >> 16) + ((right & 32768) >> 15)
+            _gfx_hline(pixels, flip, left, right, y, color)
+
+
+@njit(**_FLAGS)
+def _outcode(x, y, right, bottom):
+    code = 0
+    if x < 0:
+        code |= 1
+    elif x > right:
+        code |= 2
+    if y < 0:
+        code |= 8
+    elif y > bottom:
+        code |= 4
+    return code
+
+
+@njit(**_FLAGS)
+def _short(value):
+    """C's conversion of an int to Sint16 (two's complement wrap)."""
+    return ((value + 32768) & 0xFFFF) - 32768
+
+
+@njit(**_FLAGS)
+def _clip_line(x1, y1, x2, y2, right, bottom):
+    """SDL_gfx's ``_clipLine`` (Cohen-Sutherland with a float32 slope): (draw, x1, y1, x2, y2)."""
+    while True:
+        code1 = _outcode(x1, y1, right, bottom)
+        code2 = _outcode(x2, y2, right, bottom)
+        if code1 | code2 == 0:
+            return True, x1, y1, x2, y2
+        if code1 & code2:
+            return False, x1, y1, x2, y2
+        if code1 == 0:
+            x1, y1, x2, y2, code1 = x2, y2, x1, y1, code2
+        slope = np.float32(y2 - y1) / np.float32(x2 - x1) if x2 != x1 else np.float32(1.0)
+        if code1 & 1:
+            y1, x1 = _short(y1 + int(np.float32(0 - x1) * slope)), 0
+        elif code1 & 2:
+            y1, x1 = _short(y1 + int(np.float32(right - x1) * slope)), right
+        elif code1 & 4:
+            if x2 != x1:
+                x1 = _short(x1 + int(np.float32(bottom - y1) / slope))
+            y1 = bottom
+        elif code1 & 8:
+            if x2 != x1:
+                x1 = _short(x1 + int(np.float32(0 - y1) / slope))
+            y1 = 0
+
+
+@njit(**_FLAGS)
+def _gfx_aaline(pixels, flip, x1, y1, x2, y2, color):
+    """SDL_gfx's ``_aalineColor`` without its end point, at alpha 255 (``color``: a mapped pixel)."""
+    draw, x1, y1, x2, y2 = _clip_line(x1, y1, x2, y2, pixels.shape[1] - 1, pixels.shape[0] - 1)
+    if not draw:
+        return
+    x0, y0, x_end, y_end = x1, y1, x2, y2
+    if y0 > y_end:
+        x0, y0, x_end, y_end = x2, y2, x1, y1
+    dx, dy = x_end - x0, y_end - y0
+    if dx == 0:
+        if dy > 0:
+            _gfx_vline(pixels, flip, x1, y0, y0 + dy, color)
+        else:
+            _blend_pixel(pixels, flip, x1, y1, color, 255)
+        return
+    if dy == 0:
+        _gfx_hline(pixels, flip, x0, x0 + dx, y1, color)
+        return
+    step = 1
+    if dx < 0:
+        step, dx = -1, -dx
+    _blend_pixel(pixels, flip, x1, y1, color, 255)
+    error = 0
+    if dy > dx:  # y-major: y advances every pixel, x when the 32-bit error accumulator wraps
+        adjust = (((dx << 16) // dy) << 16) & _U32
+        x_next = x0 + step
+        for _ in range(dy - 1):
+            previous, error = error, (error + adjust) & _U32
+            if error <= previous:
+                x0, x_next = x_next, x_next + step
+            y0 += 1
+            weight = (error >> 24) & 255
+            _blend_pixel(pixels, flip, x0, y0, color, (255 * (255 - weight)) >> 8)
+            _blend_pixel(pixels, flip, x_next, y0, color, (255 * weight) >> 8)
+    else:  # x-major
+        adjust = (((dy << 16) // dx) << 16) & _U32
+        y_next = y0 + 1
+        for _ in range(dx - 1):
+            previous, error = error, (error + adjust) & _U32
+            if error <= previous:
+                y0, y_next = y_next, y_next + 1
+            x0 += step
+            weight = (error >> 24) & 255
+            _blend_pixel(pixels, flip, x0, y0, color, (255 * (255 - weight)) >> 8)
+            _blend_pixel(pixels, flip, x0, y_next, color, (255 * weight) >> 8)
+
+
+@njit(**_FLAGS)
+def gfx_aapolygon(pixels, flip, xs, ys, color):
+    """``pygame.gfxdraw.aapolygon``: each edge in order, the closing one last."""
+    count = xs.shape[0]
+    for i in range(1, count):
+        _gfx_aaline(pixels, flip, xs[i - 1], ys[i - 1], xs[i], ys[i], color)
+    _gfx_aaline(pixels, flip, xs[count - 1], ys[count - 1], xs[0], ys[0], color)
+
+
+@njit(**_FLAGS)
+def _draw_hline(pixels, flip, x1, y, x2, color):
+    """pygame's ``drawhorzlineclipbounding``."""
+    if y < 0 or y >= pixels.shape[0]:
+        return
+    if x2 < x1:
+        x1, x2 = x2, x1
+    x1, x2 = max(x1, 0), min(x2, pixels.shape[1] - 1)
+    if x2 < 0 or x1 >= pixels.shape[1]:
+        return
+    pixels[_row(pixels, flip, y), x1:x2 + 1] = color
+
+
+@njit(**_FLAGS)
+def draw_polygon(pixels, flip, xs, ys, color):
+    """``pygame.draw.polygon`` filled, of four or more integer vertices (pygame's ``draw_fillpoly``)."""
+    count = xs.shape[0]
+    low, high = ys.min(), ys.max()
+    if low == high:
+        _draw_hline(pixels, flip, xs.min(), low, xs.max(), color)
+        return
+    crossings = np.empty(count, dtype=np.int64)
+    for y in range(max(low, 0), min(high, pixels.shape[0] - 1) + 1):
+        found = _row_crossings(xs, ys, y, high, crossings, False)
+        for i in range(0, found - 1, 2):
+            _draw_hline(pixels, flip, crossings[i], y, crossings[i + 1], color)
+    for i in range(count):
+        previous = count - 1 if i == 0 else i - 1
+        y = ys[i]
+        if low < y < high and ys[previous] == y:
+            _draw_hline(pixels, flip, xs[i], y, xs[previous], color)
+
+
+@njit(**_FLAGS)
+def draw_polygons(pixels, flip, xs, ys, starts, colors, antialiased):
+    """Polygons in order, polygon ``k`` being ``xs[starts[k]:starts[k + 1]]`` (and ``ys``):
+    ``gfxdraw.aapolygon`` then ``gfxdraw.filled_polygon`` where ``antialiased[k]`` (road, grass),
+    else ``draw.polygon`` (the car)."""
+    for k in range(colors.shape[0]):
+        polygon_xs, polygon_ys = xs[starts[k]:starts[k + 1]], ys[starts[k]:starts[k + 1]]
+        if antialiased[k]:
+            gfx_aapolygon(pixels, flip, polygon_xs, polygon_ys, colors[k])
+            gfx_filled_polygon(pixels, flip, polygon_xs, polygon_ys, colors[k])
+        else:
+            draw_polygon(pixels, flip, polygon_xs, polygon_ys, colors[k])

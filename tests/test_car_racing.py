@@ -1,0 +1,235 @@
+"""The fast CarRacing (issue 9) returns exactly what Gymnasium's does, and the project makes it by default.
+
+Each scenario runs Gymnasium's class (``CarRacingStock-v3``) and ``FastCarRacing`` (``CarRacing-v3``)
+side by side on the real environment, from the same seed with the same actions, and requires the
+observations (and, where asked, the ``rgb_array`` frames) to be ``np.array_equal`` and the rewards,
+``terminated``, ``truncated`` and ``info`` to be equal at every step, the zoom-in of the first second
+included. Longer runs on other seeds and actions are in ``benchmarks/car_racing.py --identity``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import pygame
+import pytest
+from pygame import gfxdraw
+
+import envs
+from envs import pygame_raster
+from envs.car_racing import FastCarRacing, box2d_transform, covers_screen, pygame_pixels, rotate_like_pygame
+from envs.make import STOCK_CAR_RACING_ID as STOCK_ID
+from gymnasium.envs.box2d.car_racing import CarRacing, PLAYFIELD
+
+
+def pair(render_mode: str | None = None, **kwargs) -> tuple[gym.Env, gym.Env]:
+    """Gymnasium's class and the project's, made alike."""
+    with envs.quiet_output():
+        stock = gym.make(STOCK_ID, render_mode=render_mode, **kwargs)
+        return stock, gym.make("CarRacing-v3", render_mode=render_mode, **kwargs)
+
+
+def assert_same_episode(seed: int, actions, render: bool = False, stock=None, fast=None, options=None,
+                        **kwargs) -> list:
+    """Step both classes in lockstep; the stock transitions, for checks on what the episode did."""
+    if stock is None:
+        stock, fast = pair("rgb_array" if render else None, **kwargs)
+    stock_obs, stock_info = stock.reset(seed=seed, options=options)
+    fast_obs, fast_info = fast.reset(seed=seed, options=options)
+    assert np.array_equal(stock_obs, fast_obs) and stock_info == fast_info
+    transitions = []
+    for step, action in enumerate(actions):
+        expected, got = stock.step(action), fast.step(action)
+        assert np.array_equal(expected[0], got[0]), f"seed {seed}: observations differ at step {step}"
+        assert expected[1:] == got[1:], f"seed {seed}, step {step}: {expected[1:]} != {got[1:]}"
+        if render:
+            assert np.array_equal(stock.render(), fast.render()), f"seed {seed}: frames differ at step {step}"
+        transitions.append(expected[1:])
+        if expected[2] or expected[3]:
+            break
+    return transitions
+
+
+def constant(action, steps: int) -> list[np.ndarray]:
+    return [np.array(action, dtype=np.float32)] * steps
+
+
+def test_leaving_the_playfield_ends_with_minus_100_and_stepping_on_still_matches():
+    # gas 1.0 alone spins the rear wheels and the car crawls (it is still on the playfield after
+    # 1000 steps); 0.5 drives it straight out in about 200 steps
+    stock, fast = pair()
+    transitions = assert_same_episode(11, constant([0.0, 1.0, 0.0], 30) + constant([0.0, 0.5, 0.0], 300),
+                                      stock=stock, fast=fast)
+    reward, terminated, truncated, info = transitions[-1]
+    assert reward == -100 and terminated and not truncated and info == {"lap_finished": False}
+    # Gymnasium lets a user step on: far out, the playfield's corners leave the range the compiled
+    # drawing reproduces, and pygame draws those frames
+    action = np.array([0.0, 0.5, 0.0], dtype=np.float32)
+    for _ in range(160):  # the compiled drawing gives up about 150 steps after the end
+        expected, got = stock.step(action), fast.step(action)
+        assert np.array_equal(expected[0], got[0]) and expected[1:] == got[1:]
+    unwrapped = fast.unwrapped
+    assert not unwrapped._draw_compiled(*unwrapped._camera())
+
+
+def test_hard_turns():
+    turns = [np.array([1.0 if (step // 40) % 2 else -1.0, 0.4, 0.0], dtype=np.float32) for step in range(180)]
+    transitions = assert_same_episode(12, turns)
+    assert len(transitions) == 180 and any(reward > 0 for reward, *_ in transitions)  # it visited tiles
+
+
+def test_braking():
+    cycle = constant([0.0, 1.0, 0.0], 30) + constant([0.2, 0.0, 1.0], 20)
+    assert len(assert_same_episode(13, cycle * 3)) == 150
+
+
+def test_random_actions_then_a_second_reset_of_the_same_instance():
+    rng = np.random.default_rng(14)
+    actions = rng.uniform([-1, 0, 0], [1, 1, 1], size=(180, 3)).astype(np.float32)
+    stock, fast = pair()
+    assert len(assert_same_episode(14, actions, stock=stock, fast=fast)) == 180
+    assert len(assert_same_episode(15, actions[:60], stock=stock, fast=fast)) == 60
+
+
+def test_rgb_array_frames_skid_marks_included():
+    rng = np.random.default_rng(16)
+    actions = [np.array([rng.uniform(-1, 1), 1.0, 0.0 if step < 60 else 0.9], dtype=np.float32) for step in range(90)]
+    assert len(assert_same_episode(16, actions, render=True)) == 90
+
+
+def test_domain_randomisation_and_discrete_actions():
+    rng = np.random.default_rng(17)
+    stock, fast = pair(domain_randomize=True)
+    assert_same_episode(17, rng.uniform([-1, 0, 0], [1, 1, 1], size=(50, 3)).astype(np.float32), stock=stock, fast=fast)
+    assert_same_episode(18, constant([0.0, 0.5, 0.0], 30), stock=stock, fast=fast, options={"randomize": False})
+    assert_same_episode(19, rng.integers(0, 5, size=50).tolist(), continuous=False)
+
+
+def test_rotation_is_pygames_bit_for_bit():
+    rng = np.random.default_rng(20)
+    points = rng.normal(0, 400, size=(64, 2))
+    quarter_turns = [k * math.pi / 2 for k in range(-8, 9)]
+    angles = [*rng.uniform(-20, 20, size=40), *quarter_turns, *(a + 5e-7 for a in quarter_turns), 2 * math.pi - 1e-12]
+    for angle in angles:
+        expected = [tuple(pygame.math.Vector2(tuple(point)).rotate_rad(angle)) for point in points.tolist()]
+        assert rotate_like_pygame(points, angle).tolist() == [list(point) for point in expected], angle
+
+
+# --- the pieces, against pygame and Box2D themselves ---------------------------------------------
+
+PYGAME_DRAWING = {
+    "gfxdraw.aapolygon": (gfxdraw.aapolygon, pygame_raster.gfx_aapolygon),
+    "gfxdraw.filled_polygon": (gfxdraw.filled_polygon, pygame_raster.gfx_filled_polygon),
+    "draw.polygon": (lambda surface, points, color: pygame.draw.polygon(surface, color, points),
+                     pygame_raster.draw_polygon),
+}
+
+
+def random_polygon(rng: np.random.Generator, width: int, height: int) -> np.ndarray:
+    """Four to eight corners, convex or not, small or huge, on or off a width x height surface,
+    with repeated, horizontal and vertical edges now and then."""
+    count = 4 if rng.random() < 0.6 else int(rng.integers(5, 9))
+    spread = rng.choice([3, 30, 100, 300, 3000, 16000])
+    centre = rng.uniform([-50, -50], [width + 50, height + 50])
+    points = centre + rng.normal(0, spread, size=(count, 2))
+    if rng.random() < 0.3:
+        points = np.round(points)
+    if rng.random() < 0.2:
+        points[1, 1] = points[0, 1]
+    if rng.random() < 0.2:
+        points[2, 0] = points[1, 0]
+    return np.clip(points, -pygame_raster.LARGEST_COORDINATE - 0.9, pygame_raster.LARGEST_COORDINATE + 0.9)
+
+
+@pytest.mark.parametrize("name", list(PYGAME_DRAWING))
+def test_compiled_drawing_writes_pygames_pixels(name):
+    draw_with_pygame, draw_compiled = PYGAME_DRAWING[name]
+    rng = np.random.default_rng(sorted(PYGAME_DRAWING).index(name))
+    width, height = 160, 120
+    for _ in range(400):
+        points = random_polygon(rng, width, height)
+        color = tuple(int(c) for c in rng.integers(0, 256, size=3))
+        before = pygame.Surface((width, height))
+        pygame.surfarray.blit_array(before, rng.integers(0, 1 << 24, size=(width, height), dtype=np.uint32))
+        expected = before.copy()
+        draw_with_pygame(expected, points.tolist(), color)  # anti-aliasing blends with what is there
+        corners = np.trunc(points).astype(np.int64)
+        for flip in (False, True):
+            got = before.copy()
+            pixels = pygame.surfarray.pixels2d(got).T
+            pixels[:] = pixels[::-1].copy() if flip else pixels
+            draw_compiled(pixels, flip, corners[:, 0].copy(), corners[:, 1].copy(), before.map_rgb(color))
+            pixels[:] = pixels[::-1].copy() if flip else pixels
+            del pixels
+            assert np.array_equal(pygame.surfarray.array2d(got), pygame.surfarray.array2d(expected)), (points, flip)
+
+
+def test_box2d_transform_is_box2ds_bit_for_bit():
+    import Box2D
+
+    rng = np.random.default_rng(21)
+    world = Box2D.b2World()  # kept: a body does not keep its world alive
+    body = world.CreateDynamicBody(position=(0, 0))
+    for _ in range(200):
+        body.position = tuple(rng.uniform(-400, 400, size=2).tolist())
+        body.angle = float(rng.uniform(-50, 50))
+        transform = body.transform
+        local = rng.normal(0, 2, size=(8, 2)).astype(np.float32)
+        pose = np.array([[transform.q.c, transform.q.s, *transform.position]] * 8, dtype=np.float32)
+        expected = [tuple(transform * tuple(point)) for point in local.tolist()]
+        assert box2d_transform(pose, local).tolist() == [list(point) for point in expected]
+
+
+def test_a_covering_playfield_polygon_is_a_fill():
+    rng = np.random.default_rng(22)
+    bound = PLAYFIELD
+    playfield = [(bound, bound), (bound, -bound), (-bound, -bound), (-bound, bound)]
+    covered = 0
+    for _ in range(40):
+        zoom, angle = rng.uniform(0.6, 16.2), rng.uniform(-7, 7)
+        position = rng.uniform(-1.2 * bound, 1.2 * bound, size=2) * rng.choice([0.1, 1.0])
+        translation = rng.uniform(-3000, 3000, size=2) - position * zoom
+        points = [tuple(pygame.math.Vector2(corner).rotate_rad(angle) * zoom + pygame.math.Vector2(*translation))
+                  for corner in playfield]
+        if not covers_screen(pygame_pixels(np.array(points))):
+            continue
+        covered += 1
+        drawn = pygame.Surface((1000, 800))
+        gfxdraw.aapolygon(drawn, points, (102, 204, 102))
+        gfxdraw.filled_polygon(drawn, points, (102, 204, 102))
+        assert np.all(pygame.surfarray.pixels2d(drawn) == drawn.map_rgb((102, 204, 102)))
+    assert covered >= 5
+
+
+def test_project_ids_make_the_fast_class_and_the_stock_id_gymnasiums():
+    assert type(gym.make("CarRacing-v3").unwrapped) is FastCarRacing
+    assert type(gym.make(STOCK_ID).unwrapped) is CarRacing
+    assert gym.spec(STOCK_ID).max_episode_steps == gym.spec("CarRacing-v3").max_episode_steps == 1000
+    for env_id, cls in (("CarRacing-v0", FastCarRacing), ("CarRacing-v3", FastCarRacing), (STOCK_ID, CarRacing)):
+        env, recipe = envs.make_env(envs.resolve_env_id(env_id, notify=lambda _: None))
+        try:
+            assert type(env.unwrapped) is cls and recipe.name == "CarRacing"  # action squashing, early stop
+        finally:
+            env.close()
+
+
+@pytest.mark.parametrize("case", ["static pixels", "hebbian pixels"])
+def test_gymnasiums_class_trains_to_the_pinned_parameters_too(case, tmp_path):
+    """The pinned CarRacing runs (tests/test_pinned.py) now use the fast class; Gymnasium's gives the same θ."""
+    from tests.test_pinned import CASES, PINNED, parameters_hash, train
+
+    kind, argv = CASES[case]
+    argv = tuple(STOCK_ID if arg == "CarRacing-v3" else arg for arg in argv)
+    assert STOCK_ID in argv
+    assert parameters_hash(train(kind, tmp_path, *argv, "--threads", "1")) == PINNED[case]
+
+
+@pytest.mark.parametrize("env_id", ["CarRacing-v3", STOCK_ID])
+def test_render_mode_for_videos(env_id):
+    env, _ = envs.make_env(env_id, render_mode="rgb_array")
+    try:
+        assert env.render().shape == (400, 600, 3)
+    finally:
+        env.close()
