@@ -32,7 +32,7 @@ def load_arrays(args) -> dict:
 
 
 def main(argv=None) -> int:
-    return evaluate_main("hebbian", build_parser(), argv, load_arrays)
+    return evaluate_main("hebbian", build_parser(), argv, load_arrays, "path_hebb")
 
 
 if __name__ == "__main__":

@@ -23,7 +23,7 @@ def load_arrays(args) -> dict:
 
 
 def main(argv=None) -> int:
-    return evaluate_main("static", build_parser(), argv, load_arrays)
+    return evaluate_main("static", build_parser(), argv, load_arrays, "path_weights")
 
 
 if __name__ == "__main__":

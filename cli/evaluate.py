@@ -2,12 +2,15 @@
 
 One evaluation function (``envs.evaluation.evaluate``) runs the episodes through the training's own
 rollout; the outputs the user asks for (``--json``, ``--plot``, ``--video``) are checked before any
-episode runs.
+episode runs. Weights trained with ``--obs_norm`` are evaluated with the observation statistics
+saved beside them (``<name>.obs_norm.npz``, ``es.observations``), found automatically; weights in
+a run folder whose config.json says ``obs_norm`` but without that file are refused.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from pathlib import Path
@@ -16,6 +19,7 @@ from cli.errors import USER_ERRORS, Parser, UserError, explained
 from cli.flags import flag_value, positive_int
 from cli.train import resolve_environments
 from envs import ProblemSpec
+from es.observations import SavedStatistics, load_statistics, statistics_path
 from policies import PolicySettings
 
 
@@ -76,8 +80,38 @@ def write_evaluation_outputs(args: argparse.Namespace, command: list[str], kind:
         print(f"video of the first episode: {args.video}")
 
 
-def evaluate_main(kind: str, parser: Parser, argv: list[str] | None, load_arrays) -> int:
-    """Shared body of the evaluate scripts; ``load_arrays(args)`` reads the weight files."""
+def saved_statistics(weight_file: Path) -> SavedStatistics | None:
+    """The observation statistics beside ``weight_file``, if there are any (said in one line)."""
+    path = statistics_path(weight_file)
+    if not path.is_file():
+        return None
+    statistics = load_statistics(path)
+    print(f"observation normalisation: statistics from {path} ({statistics.observations} observations)")
+    return statistics
+
+
+def trained_with_obs_norm(weight_file: Path) -> bool:
+    """Whether the run folder ``weight_file`` lies in (its config.json) normalised observations."""
+    try:
+        return bool(json.loads((weight_file.parent / "config.json").read_text())["policy"]["obs_norm"])
+    except (OSError, ValueError, KeyError, TypeError):  # not in a run folder, or one from before --obs_norm
+        return False
+
+
+def normalise_observations(problem, weight_file: Path, statistics: SavedStatistics | None) -> None:
+    """Give a normalising policy its statistics; refuse where they are missing."""
+    if not problem.policy.normalised_inputs:
+        return
+    if statistics is None:
+        raise UserError(f"{weight_file} was trained with --obs_norm, but its observation statistics "
+                        f"{statistics_path(weight_file)} are missing; put that file of the run beside it")
+    with explained(f"cannot use the statistics {statistics_path(weight_file)}"):
+        problem.policy.observe((statistics.mean, statistics.std))
+
+
+def evaluate_main(kind: str, parser: Parser, argv: list[str] | None, load_arrays, weight_flag: str) -> int:
+    """Shared body of the evaluate scripts; ``load_arrays(args)`` reads the weight files, the file of
+    ``weight_flag`` is the one observation statistics are looked for beside."""
     from envs.evaluation import evaluate
     from report.video import record_first_episode
 
@@ -91,11 +125,16 @@ def evaluate_main(kind: str, parser: Parser, argv: list[str] | None, load_arrays
         if args.render and args.video:
             raise UserError("--video records frames off screen; it cannot be combined with --render")
         arrays = load_arrays(args)
-        spec = ProblemSpec(env_ids, PolicySettings(kind, **{name: getattr(args, name) for name in
-                                                            ("hebb_rule", "init_weights") if hasattr(args, name)}))
+        weight_file = Path(getattr(args, weight_flag))
+        with explained("cannot load the observation statistics"):
+            statistics = saved_statistics(weight_file)
+        options = {name: getattr(args, name) for name in ("hebb_rule", "init_weights") if hasattr(args, name)}
+        spec = ProblemSpec(env_ids, PolicySettings(kind, **options, obs_clip=statistics.clip if statistics else None,
+                                                   obs_norm=statistics is not None or trained_with_obs_norm(weight_file)))
         render_mode = "human" if args.render else ("rgb_array" if args.video else None)
         with explained("cannot make the environments"):
             problem = spec.build(render_mode)
+        normalise_observations(problem, weight_file, statistics)
         with explained("cannot load the weights"):
             params = problem.policy.load(arrays)
         if args.video:

@@ -17,6 +17,7 @@ import gymnasium as gym
 from gymnasium.envs.registration import parse_env_id
 
 from envs.recipes import Recipe, recipe_for
+from envs.wrappers import MaxEpisodeSteps
 
 
 class EnvironmentError_(ValueError):
@@ -91,8 +92,10 @@ def quiet_output():
         os.close(devnull)
 
 
-def make_env(env_id: str, render_mode: str | None = None) -> tuple[gym.Env, Recipe]:
-    """Make a registered (already resolved) id, wrapped by its family's recipe, warmed up.
+def make_env(env_id: str, render_mode: str | None = None,
+             max_episode_steps: int | None = None) -> tuple[gym.Env, Recipe]:
+    """Make a registered (already resolved) id, wrapped by its family's recipe (and, outermost, by
+    ``MaxEpisodeSteps`` if a cap is given), warmed up.
 
     The warm-up reset matters for pyBullet: its first reset loads the model and later ones restore
     a saved state, which gives slightly different trajectories. After the warm-up every episode,
@@ -102,5 +105,7 @@ def make_env(env_id: str, render_mode: str | None = None) -> tuple[gym.Env, Reci
         env = gym.make(env_id, render_mode=render_mode)
         recipe = recipe_for(env)
         env = recipe.wrap(env)
+        if max_episode_steps is not None:
+            env = MaxEpisodeSteps(env, max_episode_steps)
         env.reset(seed=0)
     return env, recipe

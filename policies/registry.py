@@ -13,6 +13,7 @@ from typing import Callable
 from policies.base import Policy
 from policies.hebbian import HebbianPolicy
 from policies.network import NetworkSpec
+from policies.normalised import NormalisedInputs
 from policies.static import StaticPolicy
 
 
@@ -22,6 +23,12 @@ class PolicySettings:
     hebb_rule: str = "ABCD_lr"  # Hebbian kinds: the rule family
     init_weights: str = "uni"  # Hebbian kinds: each episode's initial weights
     distribution: str = "normal"  # Hebbian kinds: generation 0's coefficients (and CNN / co-evolved weights)
+    obs_norm: bool = False  # the input layer sees (obs - mean) / std (``policies.normalised``); not for pixels
+    obs_clip: float | None = None  # with obs_norm: clip the normalised observations to +-obs_clip
+
+    def __post_init__(self) -> None:
+        if self.obs_clip is not None and not 0 < self.obs_clip < float("inf"):
+            raise ValueError(f"--obs_clip must be a number > 0, got {self.obs_clip}")
 
 
 @dataclass(frozen=True)
@@ -45,5 +52,9 @@ def kind_of(settings: PolicySettings) -> Kind:
 
 def make_policy(settings: PolicySettings, net: NetworkSpec, normalise: bool = True) -> Policy:
     """The policy ``settings`` name, for a network ``net``; ``normalise``: the environment's Hebbian
-    weight normalisation (upstream spec §4.3), used by plastic kinds only."""
-    return kind_of(settings).build(settings, net, normalise)
+    weight normalisation (upstream spec §4.3), used by plastic kinds only. With ``obs_norm`` a
+    vector-input network sees normalised observations; a pixel network is left as it is."""
+    policy = kind_of(settings).build(settings, net, normalise)
+    if settings.obs_norm and not net.pixels:
+        return NormalisedInputs(policy, net.obs_shape[0], settings.obs_clip)
+    return policy

@@ -42,6 +42,7 @@ def check_length(name: str, array: np.ndarray, expected: int, what: str) -> np.n
 class StaticPolicy:
     penalised_name = "w"
     roles = ("weights",)
+    normalised_inputs = 0
 
     def __init__(self, net: NetworkSpec):
         self.net = net
