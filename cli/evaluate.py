@@ -2,12 +2,15 @@
 
 One evaluation function (``envs.evaluation.evaluate``) runs the episodes through the training's own
 rollout; the outputs the user asks for (``--json``, ``--plot``, ``--video``) are checked before any
-episode runs.
+episode runs. Weights trained with ``--obs_norm`` are evaluated with the observation statistics
+saved beside them (``<name>.obs_norm.npz``, ``es.observations``), found automatically; weights in
+a run folder whose config.json says ``obs_norm`` but without that file are refused.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from pathlib import Path
@@ -17,6 +20,7 @@ from cli.flags import SEED_RANGE, flag_value, positive_int, seed_value
 from cli.train import resolve_environments
 from envs import ProblemSpec
 from envs.headless import RenderingUnavailable, check_can_render, choose_mujoco_gl
+from es.observations import SavedStatistics, load_statistics, statistics_path
 from policies import PolicySettings
 from report.video import check_video_path
 
@@ -114,9 +118,38 @@ def build_problem(spec: ProblemSpec, render_mode: str | None):
     return problem
 
 
+def saved_statistics(weight_file: Path) -> SavedStatistics | None:
+    """The observation statistics beside ``weight_file``, if there are any (said in one line)."""
+    path = statistics_path(weight_file)
+    if not path.is_file():
+        return None
+    statistics = load_statistics(path)
+    say(f"observation normalisation: statistics from {path} ({statistics.observations} observations)")
+    return statistics
+
+
+def trained_with_obs_norm(weight_file: Path) -> bool:
+    """Whether the run folder ``weight_file`` lies in (its config.json) normalised observations."""
+    try:
+        return bool(json.loads((weight_file.parent / "config.json").read_text())["policy"]["obs_norm"])
+    except (OSError, ValueError, KeyError, TypeError):  # not in a run folder, or one from before --obs_norm
+        return False
+
+
+def normalise_observations(problem, weight_file: Path, statistics: SavedStatistics | None) -> None:
+    """Give a normalising policy its statistics; refuse where they are missing."""
+    if not problem.policy.normalised_inputs:
+        return
+    if statistics is None:
+        raise UserError(f"{weight_file} was trained with --obs_norm, but its observation statistics "
+                        f"{statistics_path(weight_file)} are missing; put that file of the run beside it")
+    with explained(f"cannot use the statistics {statistics_path(weight_file)}"):
+        problem.policy.observe((statistics.mean, statistics.std))
+
+
 def evaluate_main(kind: str, parser: Parser, argv: list[str] | None, load_arrays, input_paths) -> int:
     """Shared body of the evaluate scripts; ``load_arrays(args)`` reads the weight files, whose paths
-    ``input_paths(args)`` lists."""
+    ``input_paths(args)`` lists (the first is the one observation statistics are looked for beside)."""
     from envs.evaluation import EpisodeError, evaluate, format_table
     from report.video import record_first_episode
 
@@ -138,10 +171,15 @@ def evaluate_main(kind: str, parser: Parser, argv: list[str] | None, load_arrays
         if args.render and args.video:
             raise UserError("--video records frames off screen; it cannot be combined with --render")
         arrays = load_arrays(args)
+        weight_file = Path(input_paths(args)[0])
+        with explained("cannot load the observation statistics"):
+            statistics = saved_statistics(weight_file)
+        options = {name: getattr(args, name) for name in ("hebb_rule", "init_weights", "network") if hasattr(args, name)}
+        policy = PolicySettings(kind, **options, obs_clip=statistics.clip if statistics else None,
+                                obs_norm=statistics is not None or trained_with_obs_norm(weight_file))
         render_mode = "human" if args.render else ("rgb_array" if args.video else None)
-        policy = PolicySettings(kind, **{name: getattr(args, name) for name in ("hebb_rule", "init_weights", "network")
-                                         if hasattr(args, name)})
         problem = build_problem(ProblemSpec(env_ids, policy), render_mode)
+        normalise_observations(problem, weight_file, statistics)
         with explained("cannot load the weights"):
             params = problem.policy.load(arrays)
         if args.video:

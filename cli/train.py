@@ -22,9 +22,12 @@ from cli.hints import TRAIN_SCRIPTS, evaluate_hint, resume_hint
 from envs import EnvSettings, ProblemSpec
 from es.backends import BACKENDS
 from es.loop import NonFiniteUpdate, Status, Trainer
+from es.optimizers import OPTIMIZERS
 from es.runfolder import RunFolder, SaveError
 from es.settings import RESUMABLE, ESSettings, RunSettings
+from es.shaping import SHAPINGS
 from policies import PolicySettings
+from report import tensorboard
 from report.log import FitnessPlot, GenerationLog
 from report.progress import display_for
 
@@ -61,7 +64,60 @@ def training_parser(prog: str, description: str, folder: str) -> Parser:
     add("--ray_address", default=None, metavar="ADDRESS",
         help="with --backend ray: 'auto' joins the cluster `ray start` runs on this machine, HOST:PORT "
              "another one; default: start a local Ray with --threads CPUs")
+    add_modern_options(parser)
     return parser
+
+
+def add_modern_options(parser: Parser) -> None:
+    """Options beyond the 2020 algorithm (OpenAI's es-starter, pytorch-es); their defaults are the
+    original's. Values are checked by the settings (``es.settings``), in one line naming the flag."""
+    group = parser.add_argument_group("beyond the original algorithm (defaults: the original)")
+    add = group.add_argument
+    add("--shaping", choices=list(SHAPINGS), default=ESSettings.shaping,
+        help="fitness shaping: rank_std (the original: centered ranks, standardised), rank (OpenAI's centered "
+             "ranks), none (the fitness, standardised)")
+    add("--optimizer", choices=list(OPTIMIZERS), default=ESSettings.optimizer,
+        help="sgd (the original), adam or momentum (OpenAI's; gradient sum F*eps / N); --lr is the step size")
+    add("--beta1", type=float, default=ESSettings.beta1, help="with --optimizer adam, in [0, 1)")
+    add("--beta2", type=float, default=ESSettings.beta2, help="with --optimizer adam, in [0, 1)")
+    add("--momentum", type=float, default=ESSettings.momentum, help="with --optimizer momentum, in [0, 1)")
+    add("--l2coeff", type=float, default=ESSettings.l2coeff, metavar="C",
+        help="weight decay in the gradient, g <- g - C * theta (OpenAI's l2coeff)")
+    add("--fitness_l2", type=float, default=ESSettings.fitness_l2, metavar="C",
+        help="the original's L2 penalty in the fitness: return - C * mean(theta_m^2)")
+    add("--obs_norm", action="store_true",
+        help="normalise observations by running statistics (OpenAI's RunningStat); not for pixels")
+    add("--obs_clip", type=float, default=None, metavar="C",
+        help="with --obs_norm: clip normalised observations to +-C (OpenAI: 5); default no clip")
+    add("--obs_norm_prob", type=float, default=ESSettings.obs_norm_prob, metavar="P",
+        help="with --obs_norm: the fraction of mirrored pairs whose observations update the statistics, in (0, 1]")
+    add("--eval_every", type=int, default=None, metavar="G",
+        help="every G generations the centre also runs --eval_episodes episodes on seeds of their own; "
+             "their mean picks best.dat")
+    add("--eval_episodes", type=int, default=ESSettings.eval_episodes, metavar="K",
+        help="with --eval_every: the centre's evaluation episodes")
+    add("--max_episode_steps", type=int, default=None, metavar="N",
+        help="end an episode (as truncated) after N policy steps; default the environment's own limit")
+    add("--tensorboard", action="store_true",
+        help=f"also write every metrics column as TensorBoard scalars in <run>/tensorboard ({tensorboard.INSTALL_HINT})")
+
+
+# flag -> (what it needs, whether the values have it): given alone, the flag would silently do nothing
+NEEDS = {
+    "beta1": ("--optimizer adam", lambda values: values["optimizer"] == "adam"),
+    "beta2": ("--optimizer adam", lambda values: values["optimizer"] == "adam"),
+    "momentum": ("--optimizer momentum", lambda values: values["optimizer"] == "momentum"),
+    "obs_clip": ("--obs_norm", lambda values: values["obs_norm"]),
+    "obs_norm_prob": ("--obs_norm", lambda values: values["obs_norm"]),
+    "eval_episodes": ("--eval_every", lambda values: values["eval_every"] is not None),
+}
+
+
+def check_needs(values: dict, given: set[str]) -> None:
+    for name in sorted(given & set(NEEDS)):
+        needed, present = NEEDS[name]
+        if not present(values):
+            raise UserError(f"--{name} has an effect only with {needed}; add {needed} or leave --{name} out")
 
 
 def given_flags(argv: list[str]) -> set[str]:
@@ -109,13 +165,20 @@ def config_from_args(kind: str, args: argparse.Namespace, argv: list[str]) -> Tr
                        if name not in given})
     if values["ray_address"] is not None and values["backend"] != "ray":
         raise UserError(f"--ray_address {values['ray_address']} needs --backend ray")
+    check_needs(values, given_flags(argv))
     seed = values["seed"] if values["seed"] is not None else secrets.randbelow(2**31)
-    es = ESSettings(**{**pick(ESSettings, values), "popsize": population_size(values["popsize"])})
-    env = EnvSettings(values["environment"], resolve_environments(values["environment"]),
-                      envs.custom_recipe_modules())
+    try:
+        es = ESSettings(**{**pick(ESSettings, values), "popsize": population_size(values["popsize"])})
+        policy = PolicySettings(**{**pick(PolicySettings, values), "kind": kind})
+        run = RunSettings(**{**pick(RunSettings, values), "seed": seed})
+        env_values = {**pick(EnvSettings, values), "env_ids": (), "recipe_modules": ()}
+        EnvSettings(**env_values)  # checked before any environment is resolved
+    except ValueError as error:  # a value out of range, from a flag or an experiment file
+        raise UserError(str(error)) from None
+    env = EnvSettings(**{**env_values, "env_ids": resolve_environments(values["environment"]),
+                         "recipe_modules": envs.custom_recipe_modules()})
     check_population_fits(es, len(env.env_ids))
-    return TrainConfig(es=es, policy=PolicySettings(**{**pick(PolicySettings, values), "kind": kind}), env=env,
-                       run=RunSettings(**{**pick(RunSettings, values), "seed": seed}))
+    return TrainConfig(es=es, policy=policy, env=env, run=run)
 
 
 def experiment_values(path: str, kind: str) -> dict:
@@ -170,6 +233,12 @@ def check_resume_flags(config: TrainConfig, args: argparse.Namespace, given: set
                         f"{', '.join('--' + name for name in RESUMABLE)} may change): start a new run instead")
 
 
+def check_tensorboard(config: TrainConfig) -> None:
+    if config.run.tensorboard and not tensorboard.available():
+        raise UserError(f"--tensorboard needs the tensorboard package, which is not installed; install it with: "
+                        f"{tensorboard.INSTALL_HINT}")
+
+
 def check_writable(folder: str) -> None:
     """Refuse, before anything is built or created, a --folder that could not hold a run folder."""
     path = Path(folder)
@@ -207,9 +276,12 @@ def write_config(trainer: Trainer, config: TrainConfig, problem, command: list[s
 def start(config: TrainConfig, folder: RunFolder | None) -> tuple[Trainer, object]:
     """The trainer of a new run (``folder`` None: created once the environments are made) or of a
     resumed one."""
-    spec = ProblemSpec(config.env.env_ids, config.policy, config.env.recipe_modules)
+    spec = ProblemSpec(config.env.env_ids, config.policy, config.env.recipe_modules, config.env.max_episode_steps)
     with explained("cannot make the environments"):
         problem = spec.build()
+    if config.policy.obs_norm and not problem.policy.normalised_inputs:
+        log("note: --obs_norm does nothing for pixel observations (the CNN sees pixels in [0, 1]); "
+            "this run normalises nothing")
     created = folder is None
     try:
         if created:
@@ -218,9 +290,11 @@ def start(config: TrainConfig, folder: RunFolder | None) -> tuple[Trainer, objec
             except OSError as error:
                 raise UserError(f"--folder {config.run.folder}: {error.strerror or error}") from None
         with explained("cannot start the run"):
+            reporters = [GenerationLog(log), FitnessPlot()]
+            if config.run.tensorboard:
+                reporters.append(tensorboard.TensorBoardLog(folder.path))
             trainer = Trainer.start(config.es, config.run, problem, spec.build, config.env.env_ids, folder,
-                                    config.env.label, log=log, display=display_for(sys.stdout),
-                                    reporters=[GenerationLog(log), FitnessPlot()])
+                                    config.env.label, log=log, display=display_for(sys.stdout), reporters=reporters)
     except BaseException:
         problem.close()
         if created and folder is not None and not any(folder.path.iterdir()):
@@ -239,6 +313,7 @@ def train_main(kind: str, parser: Parser, argv: list[str] | None = None) -> int:
         else:
             config, folder = config_from_args(kind, args, argv), None
             check_writable(config.run.folder)
+        check_tensorboard(config)
         trainer, problem = start(config, folder)
         if folder is None:
             write_config(trainer, config, problem, [parser.prog, *argv])
@@ -275,8 +350,10 @@ def report_end(trainer: Trainer, config: TrainConfig, status: Status) -> None:
     """The run's last line: how to evaluate it, or how to resume it."""
     folder = trainer.folder
     if status is Status.DONE:
-        # Not ``best``: that is the centre with the best single-episode return, a noisy choice.
-        paths = {role: folder.named_path("last", role) for role in trainer.policy.roles}
+        # ``best`` only with --eval_every: otherwise it is the centre with the best single-episode
+        # return, a noisy choice.
+        prefix = "best" if config.es.eval_every is not None and trainer.history.best_theta is not None else "last"
+        paths = {role: folder.named_path(prefix, role) for role in trainer.policy.roles}
         log(f"done; evaluate with: {evaluate_hint(config, paths)}")
     elif status is Status.INTERRUPTED:
         log(f"interrupted after generation {trainer.state.generation}; resume with: "

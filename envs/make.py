@@ -20,6 +20,7 @@ from gymnasium.envs.registration import parse_env_id
 
 from envs import atari
 from envs.recipes import Recipe, recipe_for
+from envs.wrappers import MaxEpisodeSteps
 
 
 STOCK_CAR_RACING_ID = "CarRacingStock-v3"
@@ -115,9 +116,11 @@ def quiet_output():
         os.close(devnull)
 
 
-def make_env(env_id: str, render_mode: str | None = None, preprocessing: str = "default") -> tuple[gym.Env, Recipe]:
+def make_env(env_id: str, render_mode: str | None = None, preprocessing: str = "default",
+             max_episode_steps: int | None = None) -> tuple[gym.Env, Recipe]:
     """Make a registered (already resolved) id, wrapped by its family's recipe (images preprocessed
-    for the network, ``envs.recipes.PREPROCESSING``), warmed up.
+    for the network, ``envs.recipes.PREPROCESSING``; and, outermost, ``MaxEpisodeSteps`` if a cap is
+    given), warmed up.
 
     The warm-up reset matters for pyBullet: its first reset loads the model and later ones restore
     a saved state, which gives slightly different trajectories. After the warm-up every episode,
@@ -127,5 +130,7 @@ def make_env(env_id: str, render_mode: str | None = None, preprocessing: str = "
         env = gym.make(env_id, render_mode=render_mode)
         recipe = recipe_for(env)
         env = recipe.wrap(env, preprocessing)
+        if max_episode_steps is not None:
+            env = MaxEpisodeSteps(env, max_episode_steps)
         env.reset(seed=0)
     return env, recipe

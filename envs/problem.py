@@ -22,6 +22,7 @@ class ProblemSpec:
     env_ids: tuple[str, ...]  # resolved ids; fitness is the mean over all of them
     policy: PolicySettings = PolicySettings()
     recipe_modules: tuple[str, ...] = ()  # imported before the environments are made (custom recipes)
+    max_episode_steps: int | None = None  # cap on an episode's policy steps (``envs.wrappers.MaxEpisodeSteps``)
 
     def build(self, render_mode: str | None = None) -> "Problem":
         return Problem(self, render_mode)
@@ -50,7 +51,7 @@ class Problem:
         self.recipes: list[Recipe] = []
         import_recipe_modules(spec.recipe_modules)
         for env_id in spec.env_ids:
-            env, recipe = make_env(env_id, render_mode, preprocessing(spec.policy))
+            env, recipe = make_env(env_id, render_mode, preprocessing(spec.policy), spec.max_episode_steps)
             self.envs.append(env)
             self.recipes.append(recipe)
         self.net = network_spec(self.envs[0], self.recipes[0])
@@ -84,7 +85,8 @@ class Problem:
             self.envs[env_index].close()
         except Exception:  # the env is already broken; a failing close must not hide the retry
             pass
-        self.envs[env_index], _ = make_env(self.spec.env_ids[env_index], preprocessing=preprocessing(self.spec.policy))
+        self.envs[env_index], _ = make_env(self.spec.env_ids[env_index], preprocessing=preprocessing(self.spec.policy),
+                                           max_episode_steps=self.spec.max_episode_steps)
 
     def close(self) -> None:
         for env in self.envs:

@@ -10,6 +10,11 @@ class EnvSettings:
     environment: str = "CarRacing-v0"  # as given on the command line: one id, or several separated by commas
     env_ids: tuple[str, ...] = ()  # the registered ids made (resolved when a run starts); fitness: their mean
     recipe_modules: tuple[str, ...] = ()  # modules that register custom recipes (``envs.recipes``)
+    max_episode_steps: int | None = None  # cap on the policy steps of an episode (``envs.wrappers.MaxEpisodeSteps``)
+
+    def __post_init__(self) -> None:
+        if self.max_episode_steps is not None and self.max_episode_steps < 1:
+            raise ValueError(f"--max_episode_steps must be a whole number >= 1, got {self.max_episode_steps}")
 
     @property
     def label(self) -> str:

@@ -11,6 +11,7 @@ import math
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from gymnasium.wrappers import TimeLimit
 from numba import njit
 
 
@@ -177,3 +178,15 @@ class NegativeRewardStop(gym.Wrapper):
         if self._streak > self._patience:
             truncated = True
         return observation, reward, terminated, truncated, info
+
+
+class MaxEpisodeSteps(TimeLimit):
+    """``--max_episode_steps``: end an episode, as ``truncated``, after this many policy steps.
+
+    Gymnasium's ``TimeLimit``, under its own name so that a run's wrapper stack (config.json)
+    tells it from the environment's registered limit. It is the outermost wrapper, so it counts
+    the steps the policy takes: a burn-in (the pyBullet ant's 40 zero-action steps, run inside
+    ``reset``) is not counted, while the environment's own limit, further in, still counts it. An
+    ant episode therefore has at most min(N, 1000 - 40) policy steps. It caps; it never lengthens
+    an episode past the environment's own limit, nor overrides a recipe's early stop.
+    """

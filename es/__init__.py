@@ -3,8 +3,9 @@ kind or a script by name.
 
     loop.py        one generation, top to bottom: ask -> tasks -> evaluate -> fitness -> tell -> record
     strategy.py    OpenAI-ES ask/tell (Salimans et al. 2017), shaping and optimiser injected
-    shaping.py     the fitness penalty and the fitness shaping
-    optimizers.py  the step (the original's SGD)
+    shaping.py     the fitness penalty and the fitness shapings (the original's, OpenAI's, none)
+    optimizers.py  the step: the original's SGD, OpenAI's Adam and momentum, weight decay
+    observations.py  --obs_norm's running observation statistics (OpenAI's RunningStat) and their files
     settings.py    ESSettings, RunSettings: the settings as frozen data
     runfolder.py   the files of a run: names, best/last, metrics, the checkpoint
     backends/      serial, process pool, Ray: one Evaluator interface, chunking and retries once

@@ -186,16 +186,19 @@ def read_json(path: Path) -> dict:
 
 METRICS_COLUMNS = ("generation", "fitness_mean", "fitness_max", "fitness_min", "fitness_std",
                    "return_mean", "center_return", "sigma", "lr", "update_factor", "skipped",
-                   "nonfinite", "env_steps", "total_env_steps", "seconds", "total_seconds")
+                   "nonfinite", "env_steps", "total_env_steps", "seconds", "total_seconds",
+                   "center_rank", "center_eval_mean", "center_eval_std")
+LATER_COLUMNS = ("center_rank", "center_eval_mean", "center_eval_std")  # absent from earlier versions' files
 
 
 def write_metrics(path: Path, rows: list[dict]) -> None:
-    """Rewrite metrics.csv whole (atomically): it is small, and a resume must drop later rows."""
+    """Rewrite metrics.csv whole (atomically): it is small, and a resume must drop later rows.
+    Rows read back from a metrics.csv of an earlier version lack the later columns: left empty."""
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=METRICS_COLUMNS)
     writer.writeheader()
     for row in rows:
-        writer.writerow({key: row[key] for key in METRICS_COLUMNS})
+        writer.writerow({key: row.get(key, "") if key in LATER_COLUMNS else row[key] for key in METRICS_COLUMNS})
     atomic_write_text(path, buffer.getvalue())
 
 

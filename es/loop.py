@@ -1,9 +1,18 @@
 """The generation loop of a training run: ask -> tasks -> evaluate -> fitness -> tell -> record.
 
-All randomness of generation g comes from ``generation_rng(seed, g)``, and the noise table and
-theta_0 from the seed alone, so a run is a pure function of its settings: the same seed gives the
-same theta with any backend and number of workers, and a resumed run continues exactly where it
-stopped. The loop knows arrays, workers and files; the policy only through its protocol
+All randomness of generation g comes from ``generation_rng(seed, g)`` (the members, their episode
+seeds, the centre's), from ``stream_rng(seed, RECORD_STREAM, g)`` (which mirrored pairs add their
+observations to the ``--obs_norm`` statistics) and ``stream_rng(seed, EVAL_STREAM, g)`` (the seeds of
+the centre's ``--eval_every`` episodes), and the noise table and theta_0 from the seed alone, so a
+run is a pure function of its settings: the same seed gives the same theta with any backend and
+number of workers, and a resumed run continues exactly where it stopped.
+
+Every generation the unperturbed centre runs one episode per member-episode on seeds of its own
+(the original's, and the row's ``center_return`` and ``center_rank``: pytorch-es's "rank of the
+unperturbed model", 1 + the members that returned more; 1 of N + 1 means no perturbation
+improved on it). With ``--eval_every G`` it also runs ``--eval_episodes K`` episodes every G
+generations, as extra tasks of the same parallel generation, on seeds drawn from
+[2^31, 2^32), a range training seeds (< 2^31 - 1) never come from; their mean then picks best. The loop knows arrays, workers and files; the policy only through its protocol
 (``num_params``, ``initial_params``, ``penalised``, ``export``, ``file_name``), the environments
 not at all; what the user sees goes through the injected ``log``, display and reporters.
 """
@@ -14,7 +23,7 @@ import contextlib
 import enum
 import math
 import time
-from dataclasses import replace
+from dataclasses import asdict, dataclass, replace
 from typing import Callable, Protocol, Sequence
 
 import numpy as np
@@ -22,13 +31,16 @@ import numpy as np
 from es.backends import EvaluationError, Evaluator, Generation, WorkerStartError, make_evaluator
 from es.interrupts import Interrupts
 from es.noise import NoiseTable, default_size
+from es.observations import RunningStat
 from es.runfolder import Checkpoint, History, RunFolder, SaveError
 from es.settings import ESSettings, RunSettings
 from es.shaping import penalised_fitness
 from es.strategy import OpenES
-from es.worker import make_tasks
+from es.worker import TASK_DTYPE, make_tasks
 
 SEED_LIMIT = 2**31 - 1
+EVAL_SEEDS = (2**31, 2**32)  # the centre's evaluation episodes: never a training seed
+RECORD_STREAM, EVAL_STREAM = 3, 4
 
 
 class NonFiniteUpdate(RuntimeError):
@@ -45,12 +57,30 @@ def generation_rng(seed: int, generation: int) -> np.random.Generator:
     return np.random.default_rng([seed, 2, generation])
 
 
+def stream_rng(seed: int, stream: int, generation: int) -> np.random.Generator:
+    """A stream of its own per option, so that an option never moves the draws of the others."""
+    return np.random.default_rng([seed, stream, generation])
+
+
+@dataclass(frozen=True)
+class CenterReport:
+    """What the generation's tasks said about the unperturbed centre."""
+
+    center_return: float  # on its own training-like seeds, as the original
+    center_rank: int  # 1 + the members whose return beat it
+    center_eval_mean: float = math.nan  # --eval_every generations: over the K evaluation episodes
+    center_eval_std: float = math.nan
+
+
 class Reporter(Protocol):
     def generation(self, row: dict) -> None:
         """After every generation, with its metrics row."""
 
     def saved(self, folder: RunFolder, rows: list[dict]) -> None:
         """After every save of the run's files, with every metrics row so far."""
+
+    def close(self) -> None:
+        """When the run ends."""
 
 
 class Trainer:
@@ -60,10 +90,12 @@ class Trainer:
         self.es, self.run, self.policy, self.noise, self.evaluator = es, run, policy, noise, evaluator
         self.n_envs, self.folder, self.label, self.log = n_envs, folder, label, log
         self.display, self.reporters = display, reporters
-        self.strategy = OpenES(es)
+        self.strategy = OpenES.from_settings(es)
         self.state = self.strategy.initial_state(policy.initial_params(np.random.default_rng([run.seed, 1])))
         self.history = History()
         self.failure: Exception | None = None  # what stopped the run, if something did
+        # --obs_norm: the statistics the next generation's episodes normalise with
+        self.observations = RunningStat.empty(policy.normalised_inputs) if policy.normalised_inputs else None
 
     @classmethod
     def start(cls, es: ESSettings, run: RunSettings, problem, build_problem: Callable[[], object],
@@ -102,10 +134,14 @@ class Trainer:
         pair_seeds = rng.integers(0, SEED_LIMIT, size=(popsize // 2, self.es.episodes))
         center_seeds = rng.integers(0, SEED_LIMIT, size=(1, self.es.episodes))
         tasks = make_tasks(np.arange(popsize + 1), np.append(indices, -1), np.append(signs, 0),
-                           np.concatenate([np.repeat(pair_seeds, 2, axis=0), center_seeds]), self.n_envs)
-        results = self._evaluate(Generation(state.generation, state.theta, state.sigma, tasks))
-        returns = results.returns.reshape(popsize + 1, -1).mean(axis=1)  # the centre is the last "member"
-        penalties = results.penalties.reshape(popsize + 1, -1)[:, 0]  # equal on every task of a member
+                           np.concatenate([np.repeat(pair_seeds, 2, axis=0), center_seeds]), self.n_envs,
+                           self._recorded_pairs(state.generation, pair_seeds.shape))
+        training_tasks = len(tasks)
+        tasks = np.concatenate([tasks, self._evaluation_tasks(state.generation)])
+        statistics = self.observations.published() if self.observations is not None else None
+        results = self._evaluate(Generation(state.generation, state.theta, state.sigma, tasks, statistics))
+        returns = results.returns[:training_tasks].reshape(popsize + 1, -1).mean(axis=1)  # the centre is last
+        penalties = results.penalties[:training_tasks].reshape(popsize + 1, -1)[:, 0]  # equal on a member's tasks
         fitness = penalised_fitness(returns[:popsize], penalties[:popsize], self.es.fitness_l2)
         new_state, info = self.strategy.tell(state, self.noise, indices, fitness)
         if not np.isfinite(new_state.theta).all():  # stop where it appears, keeping the last finite theta
@@ -113,11 +149,39 @@ class Trainer:
                                   f"sigma {state.sigma:g}, update factor {info['update_factor']:g}); theta is kept as "
                                   f"after generation {state.generation}")
         self.state = new_state
-        center_return = float(returns[popsize])
-        if math.isfinite(center_return) and center_return > self.history.best_center:
-            self.history.best_center, self.history.best_theta = center_return, state.theta
-        return self._record(fitness, returns[:popsize], center_return, info, int(results.steps.sum()),
+        center = self._center(state, returns, results.returns[training_tasks:])
+        if self.observations is not None:
+            self.observations = self.observations.merged(results.observations)
+        return self._record(fitness, returns[:popsize], center, info, int(results.steps.sum()),
                             time.perf_counter() - started)
+
+    def _recorded_pairs(self, generation: int, shape: tuple[int, int]) -> np.ndarray | None:
+        """--obs_norm: which episodes of each mirrored pair (both members alike) add their observations."""
+        if self.observations is None:
+            return None
+        draws = stream_rng(self.run.seed, RECORD_STREAM, generation).random(shape) < self.es.obs_norm_prob
+        return np.concatenate([np.repeat(draws, 2, axis=0), np.zeros((1, shape[1]), dtype=bool)])
+
+    def _evaluation_tasks(self, generation: int) -> np.ndarray:
+        """--eval_every generations: the centre on eval_episodes seeds of its own, on every environment."""
+        if not self.es.evaluates_centre(generation):
+            return np.zeros(0, dtype=TASK_DTYPE)
+        seeds = stream_rng(self.run.seed, EVAL_STREAM, generation).integers(*EVAL_SEEDS, size=(1, self.es.eval_episodes))
+        return make_tasks(np.array([self.es.popsize]), np.array([-1]), np.array([0]), seeds, self.n_envs)
+
+    def _center(self, state, returns: np.ndarray, evaluation: np.ndarray) -> CenterReport:
+        """The centre's row entries; best/best_* follow its return, or its evaluation mean with --eval_every."""
+        popsize = self.es.popsize
+        center_return = float(returns[popsize])
+        report = CenterReport(center_return, 1 + int((returns[:popsize] > center_return).sum()))
+        if evaluation.size:
+            per_seed = evaluation.reshape(self.n_envs, -1).mean(axis=0)  # each seed: the mean over the envs
+            report = replace(report, center_eval_mean=float(per_seed.mean()), center_eval_std=float(per_seed.std()))
+        score = report.center_eval_mean if self.es.eval_every is not None else center_return
+        if math.isfinite(score) and score > self.history.best_center:
+            self.history.best_center, self.history.best_theta = score, state.theta
+            self.history.best_observations = self.observations  # what that centre was evaluated with
+        return report
 
     def _evaluate(self, generation: Generation):
         """The generation's episodes, under the live progress line; retried failures are reported."""
@@ -130,7 +194,7 @@ class Trainer:
             self.log(f"warning: {message}")
         return results
 
-    def _record(self, fitness: np.ndarray, returns: np.ndarray, center_return: float, info: dict, steps: int,
+    def _record(self, fitness: np.ndarray, returns: np.ndarray, center: CenterReport, info: dict, steps: int,
                 seconds: float) -> dict:
         """Append the generation's metrics row, rewrite metrics.csv, tell the reporters."""
         history, after, finite = self.history, self.state, np.isfinite(fitness)
@@ -144,7 +208,7 @@ class Trainer:
         penalised = after.theta[self.policy.penalised]
         row = dict(generation=after.generation, fitness_mean=stat(fitness, np.mean), fitness_max=stat(fitness, np.max),
                    fitness_min=stat(fitness, np.min), fitness_std=stat(fitness, np.std),
-                   return_mean=stat(returns, np.mean), center_return=center_return, sigma=after.sigma, lr=after.lr,
+                   return_mean=stat(returns, np.mean), **asdict(center), sigma=after.sigma, lr=after.lr,
                    update_factor=info["update_factor"], skipped=int(info["skipped"]),
                    nonfinite=int((~finite).sum()), env_steps=steps, total_env_steps=history.total_steps,
                    seconds=round(seconds, 3), total_seconds=round(history.total_seconds, 3),
@@ -161,13 +225,14 @@ class Trainer:
     def save(self) -> None:
         """The run's files, what the reporters save, and last the checkpoint: a save cut short
         leaves the previous checkpoint to resume from."""
-        self.folder.save_generation(self.policy, self.state, self.history, self.label, self.es.popsize)
+        self.folder.save_generation(self.policy, self.state, self.history, self.label, self.es.popsize,
+                                    self.observations)
         for reporter in self.reporters:
             reporter.saved(self.folder, self.history.metrics)
         self.save_checkpoint()
 
     def save_checkpoint(self) -> None:
-        self.folder.save_checkpoint(Checkpoint.of(self.state, self.history))
+        self.folder.save_checkpoint(Checkpoint.of(self.state, self.history, self.observations))
 
     def restore(self, checkpoint: Checkpoint) -> None:
         """Continue from ``checkpoint``; metrics rows after it are dropped."""
@@ -176,6 +241,8 @@ class Trainer:
                              f"this run needs {self.policy.num_params}")
         self.state = checkpoint.state()
         self.history = checkpoint.history(self.folder.read_metrics(checkpoint.generation))
+        if self.observations is not None:
+            self.observations = RunningStat.from_arrays(checkpoint.observations) or self.observations
 
     def _stop(self, error: Exception) -> Status:
         """Report what stopped the run, and checkpoint it if that still works."""
@@ -189,5 +256,7 @@ class Trainer:
         return Status.FAILED
 
     def close(self) -> None:
+        for reporter in self.reporters:
+            reporter.close()
         self.evaluator.close()
         self.noise.close()

@@ -2,9 +2,12 @@
 
 ``<folder>/<time>_<env>_seed<seed>/`` holds the original project's files (``.dat`` parameter files
 named as upstream by the policy, ``Fitness_values_<run>_<env>.npy``), ``best``/``last`` copies of
-the parameters, ``config.json``, ``metrics.csv`` and ``checkpoint.npz``. Every write is atomic
-(``es.files``), and an OSError becomes a ``SaveError`` that names the file. The checkpoint is the
-fields of one dataclass, ``Checkpoint``, written and read by iterating over them.
+the parameters, ``config.json``, ``metrics.csv`` and ``checkpoint.npz``; with ``--obs_norm``, a
+``<name>.obs_norm.npz`` of observation statistics beside each weight file (``es.observations``).
+Every write is atomic (``es.files``), and an OSError becomes a ``SaveError`` that names the file.
+The checkpoint is the fields of one dataclass, ``Checkpoint``, written and read by iterating over
+them; a field holding a dict of arrays (the optimiser's state, the observation statistics) is
+stored as one array per key, ``<field>.<key>``, and is empty in checkpoints written before it existed.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from typing import Callable
 import numpy as np
 
 from es import files
+from es.observations import RunningStat, statistics_bytes, statistics_path
 from es.strategy import ESState
 
 
@@ -36,8 +40,9 @@ class RunFolderError(ValueError):
 class History:
     """What a run has done so far, beyond the strategy state: saved in the checkpoint."""
 
-    best_theta: np.ndarray | None = None  # the centre with the best return so far
+    best_theta: np.ndarray | None = None  # the centre with the best return (or evaluation mean) so far
     best_center: float = -math.inf
+    best_observations: RunningStat | None = None  # --obs_norm: the statistics best_theta was evaluated with
     fitness_log: list[float] = field(default_factory=list)  # the original's Fitness_values file
     metrics: list[dict] = field(default_factory=list)
     total_steps: int = 0
@@ -57,37 +62,54 @@ class Checkpoint:
     fitness_log: np.ndarray  # the original's Fitness_values file
     total_steps: int
     total_seconds: float
+    optimizer: dict[str, np.ndarray] = field(default_factory=dict)  # e.g. Adam's m, v and t
+    observations: dict[str, np.ndarray] = field(default_factory=dict)  # --obs_norm: RunningStat's sums
+    best_observations: dict[str, np.ndarray] = field(default_factory=dict)  # those best_theta was evaluated with
 
     @classmethod
-    def of(cls, state: ESState, history: History) -> "Checkpoint":
+    def of(cls, state: ESState, history: History, observations: RunningStat | None = None) -> "Checkpoint":
         best = history.best_theta if history.best_theta is not None else np.zeros(0, np.float32)
         return cls(theta=state.theta, lr=state.lr, sigma=state.sigma, generation=state.generation,
                    best_theta=best, best_center=history.best_center, fitness_log=np.array(history.fitness_log),
-                   total_steps=history.total_steps, total_seconds=history.total_seconds)
+                   total_steps=history.total_steps, total_seconds=history.total_seconds, optimizer=state.optimizer,
+                   observations=observations.to_arrays() if observations is not None else {},
+                   best_observations=(history.best_observations.to_arrays()
+                                      if history.best_observations is not None else {}))
 
     def state(self) -> ESState:
-        return ESState(self.theta.astype(np.float32), self.lr, self.sigma, self.generation)
+        return ESState(self.theta.astype(np.float32), self.lr, self.sigma, self.generation, dict(self.optimizer))
 
     def history(self, metrics: list[dict]) -> History:
         return History(self.best_theta if self.best_theta.size else None, self.best_center,
+                       RunningStat.from_arrays(self.best_observations),
                        [float(value) for value in self.fitness_log], metrics, self.total_steps, self.total_seconds)
 
     def to_bytes(self) -> bytes:
+        arrays = {}
+        for item in fields(self):
+            value = getattr(self, item.name)
+            if isinstance(value, dict):
+                arrays.update({f"{item.name}.{key}": np.asarray(array) for key, array in value.items()})
+            else:
+                arrays[item.name] = np.asarray(value)
         buffer = io.BytesIO()
-        np.savez(buffer, **{item.name: np.asarray(getattr(self, item.name)) for item in fields(self)})
+        np.savez(buffer, **arrays)
         return buffer.getvalue()
 
     @classmethod
     def from_file(cls, path: Path) -> "Checkpoint":
         types = typing.get_type_hints(cls)
         with np.load(path) as saved:
-            return cls(**{item.name: _decode(saved[item.name], types[item.name]) for item in fields(cls)})
+            return cls(**{item.name: _decode(saved, item.name, types[item.name]) for item in fields(cls)})
 
 
-def _decode(array: np.ndarray, kind: type):
+def _decode(saved, name: str, kind: type):
+    if typing.get_origin(kind) is dict:
+        prefix = f"{name}."
+        return {key[len(prefix):]: np.array(saved[key]) for key in saved.files if key.startswith(prefix)}
     if kind is np.ndarray:
-        return np.array(array)
-    return kind(array)
+        return np.array(saved[name])
+    return kind(saved[name])
 
 
 def named_file(prefix: str, role: str) -> str:
@@ -140,17 +162,29 @@ class RunFolder:
 
     # --- parameters ---------------------------------------------------------------------------
 
-    def save_generation(self, policy, state: ESState, history: History, label: str, popsize: int) -> None:
+    def save_generation(self, policy, state: ESState, history: History, label: str, popsize: int,
+                        observations: RunningStat | None = None) -> None:
         """The original's files of the generation just done (named by the policy), best/last, the
-        fitness log; the checkpoint is written separately, last."""
+        fitness log, and with ``observations`` the statistics beside the weight files of each; the
+        checkpoint is written separately, last."""
         reward = reward_label(float(history.metrics[-1]["fitness_mean"]) if history.metrics else math.nan)
         arrays = policy.export(state.theta)
-        self.save_parameters({policy.file_name(role, label, reward, popsize, state.generation - 1): array
-                              for role, array in arrays.items()})
+        names = {role: policy.file_name(role, label, reward, popsize, state.generation - 1) for role in arrays}
+        self.save_parameters({names[role]: array for role, array in arrays.items()})
         self.save_named("last", arrays)
+        weight_role = policy.roles[0]  # the file evaluate_*.py is given: static weights, Hebbian coefficients
+        if observations is not None:
+            for name in (names[weight_role], named_file("last", weight_role)):
+                self.save_statistics(name, observations, policy.clip)
         if history.best_theta is not None:
             self.save_named("best", policy.export(history.best_theta))
+            if history.best_observations is not None:
+                self.save_statistics(named_file("best", weight_role), history.best_observations, policy.clip)
         self.save_fitness_log(label, history.fitness_log)
+
+    def save_statistics(self, weight_file: str, observations: RunningStat, clip: float | None) -> None:
+        """``<weight file>.obs_norm.npz``: the observation statistics to evaluate that file with."""
+        self.write(files.atomic_write_bytes, statistics_path(weight_file).name, statistics_bytes(observations, clip))
 
     def save_parameters(self, named_arrays: dict[str, np.ndarray]) -> None:
         for name, array in named_arrays.items():

@@ -3,13 +3,30 @@
 
 Every constant the original hard-coded is a field here, with the original's value as its default
 (upstream spec §2.1, §9.1 item 7): the learning-rate floor, the sigma decay and floor, and the L2
-coefficient of the fitness penalty.
+coefficient of the fitness penalty. The options beyond the original (the shaping, the optimiser,
+weight decay in the gradient, observation statistics, centre evaluation; OpenAI's es-starter and
+pytorch-es, spec §2.5 and §7.4) default to the original's behaviour. Fields are named as their
+flags, and a value out of range is refused with a message naming the flag.
 """
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
+
+from es.optimizers import OPTIMIZERS
+from es.shaping import SHAPINGS
+
+
+def check_setting(name: str, value, valid: bool, expected: str) -> None:
+    """Refuse ``value`` of the setting (and flag) ``name`` unless ``valid``."""
+    if not valid:
+        raise ValueError(f"--{name} must be {expected}, got {value}")
+
+
+def check_choice(name: str, value: str, choices) -> None:
+    check_setting(name, repr(value), value in choices, f"one of {', '.join(choices)}")
 
 
 @dataclass(frozen=True)
@@ -26,6 +43,34 @@ class ESSettings:
     fitness_l2: float = 0.01  # fitness = return - fitness_l2 * mean(theta_m^2) over the penalised part
     episodes: int = 1  # episodes per fitness evaluation (the fitness is their mean)
     noise_size: int | None = None  # floats in the noise table; None: sized to the parameter count
+    shaping: str = "rank_std"  # es.shaping.SHAPINGS
+    optimizer: str = "sgd"  # es.optimizers.OPTIMIZERS
+    beta1: float = 0.9  # adam
+    beta2: float = 0.999  # adam
+    momentum: float = 0.9  # momentum
+    l2coeff: float = 0.0  # weight decay in the gradient: g <- g - l2coeff * theta
+    obs_norm_prob: float = 0.01  # with obs_norm: the fraction of mirrored pairs whose observations count
+    eval_every: int | None = None  # every this many generations the centre runs eval_episodes episodes
+    eval_episodes: int = 10
+
+    def __post_init__(self) -> None:
+        check_choice("shaping", self.shaping, SHAPINGS)
+        check_choice("optimizer", self.optimizer, OPTIMIZERS)
+        for name in ("beta1", "beta2", "momentum"):
+            value = getattr(self, name)
+            check_setting(name, value, 0 <= value < 1, "in [0, 1)")
+        for name in ("l2coeff", "fitness_l2"):
+            value = getattr(self, name)
+            check_setting(name, value, 0 <= value < math.inf, "a number >= 0")
+        check_setting("obs_norm_prob", self.obs_norm_prob, 0 < self.obs_norm_prob <= 1, "in (0, 1]")
+        check_setting("eval_every", self.eval_every, self.eval_every is None or self.eval_every >= 1,
+                      "a whole number >= 1")
+        check_setting("eval_episodes", self.eval_episodes, self.eval_episodes >= 1, "a whole number >= 1")
+
+    def evaluates_centre(self, generation: int) -> bool:
+        """Whether the centre runs its evaluation episodes in generation ``generation`` (0-based):
+        generations G, 2G, ... counted from 1."""
+        return self.eval_every is not None and (generation + 1) % self.eval_every == 0
 
 
 @dataclass(frozen=True)
@@ -39,6 +84,7 @@ class RunSettings:
     seed: int = 0
     backend: str = "process"  # "process" or "ray"
     ray_address: str | None = None  # --backend ray: None starts a local Ray
+    tensorboard: bool = False  # also write every metrics column as TensorBoard scalars
 
     @property
     def workers(self) -> int:
@@ -50,4 +96,4 @@ class RunSettings:
         return self.threads == 1 or (self.backend == "process" and self.workers == 1)
 
 
-RESUMABLE = ("generations", "threads", "backend", "ray_address", "print_every")  # what a resume may change
+RESUMABLE = ("generations", "threads", "backend", "ray_address", "print_every", "tensorboard")  # what a resume may change

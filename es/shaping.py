@@ -4,6 +4,14 @@ Najarro & Risi (2020), as the OpenAI-ES of Salimans et al. (2017) they adapt (up
 the fitness of member m is its episode return minus ``fitness_l2 * mean(theta_m^2)`` over the
 penalised part of its parameters (all static weights; the Hebbian coefficients only), and the step
 uses centered ranks in [-0.5, 0.5], then standardised ("rank_std").
+
+``SHAPINGS`` is the one registry of shapings (``--shaping``):
+
+    rank_std  the original: centered ranks, then standardised (x 3.447 at N = 200, spec §2.1 step 4)
+    rank      OpenAI es-starter's ``centered_rank`` (spec §2.5): the centered ranks alone
+    none      the fitness itself, standardised (non-finite fitness counts as the lowest finite one)
+
+Each returns None when every member is equal: there is no direction to step in.
 """
 
 from __future__ import annotations
@@ -62,4 +70,20 @@ def rank_std(fitness: np.ndarray) -> np.ndarray | None:
     return standardise(centered_ranks(fitness))
 
 
-SHAPINGS: dict[str, Shaping] = {"rank_std": rank_std}
+def rank(fitness: np.ndarray) -> np.ndarray | None:
+    """OpenAI's centered ranks in [-0.5, 0.5], without the original's standardisation."""
+    ranks = centered_ranks(fitness)
+    return ranks if ranks.any() else None
+
+
+def standardised_fitness(fitness: np.ndarray) -> np.ndarray | None:
+    """Raw fitness, standardised. NaN and infinite values (ranked last by the other shapings) take the
+    lowest finite value, so that they never reach theta; if none is finite there is nothing to step on."""
+    fitness = np.asarray(fitness, dtype=np.float64)
+    finite = np.isfinite(fitness)
+    if not finite.any():
+        return None
+    return standardise(np.where(finite, fitness, fitness[finite].min()))
+
+
+SHAPINGS: dict[str, Shaping] = {"rank_std": rank_std, "rank": rank, "none": standardised_fitness}

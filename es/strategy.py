@@ -6,7 +6,12 @@ Algorithm 2, as adapted by Najarro & Risi 2020 (upstream spec §2.1):
 - mirrored sampling: members 2p and 2p+1 are theta + sigma*eps_p and theta - sigma*eps_p;
 - fitness shaping (``es.shaping``), injected: by default centered ranks, then standardised;
 - the step (``es.optimizers``), injected: by default theta += lr / (N * sigma) * sum_m F_m * eps_m;
-- schedules: lr *= decay while lr > lr_floor; sigma *= sigma_decay while sigma > sigma_floor.
+  OpenAI's Adam or momentum on request, each with optional weight decay in the gradient;
+- schedules: lr *= decay while lr > lr_floor; sigma *= sigma_decay while sigma > sigma_floor,
+  whatever the optimiser (lr is its step size).
+
+``OpenES.from_settings`` picks the shaping and the optimiser the settings name (``--shaping``,
+``--optimizer``) from their registries.
 
 The perturbations eps_p are slices of a shared noise table (``es.noise``), so a member is only a
 noise index and a sign. ``ask``/``tell`` work on a flat float32 vector and never print; ``tell``
@@ -20,9 +25,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from es.noise import NoiseTable
-from es.optimizers import Optimizer, OptimizerState, sgd
+from es.optimizers import SGD, Optimizer, OptimizerState, make_optimizer
 from es.settings import ESSettings
-from es.shaping import Shaping, rank_std
+from es.shaping import SHAPINGS, Shaping, rank_std
 
 
 @dataclass(frozen=True)
@@ -46,7 +51,11 @@ def decay_sigma(sigma: float, settings: ESSettings) -> float:
 class OpenES:
     settings: ESSettings
     shaping: Shaping = rank_std
-    optimizer: Optimizer = sgd
+    optimizer: Optimizer = SGD()
+
+    @classmethod
+    def from_settings(cls, settings: ESSettings) -> "OpenES":
+        return cls(settings, SHAPINGS[settings.shaping], make_optimizer(settings))
 
     def __post_init__(self) -> None:
         size = self.settings.popsize
@@ -78,9 +87,10 @@ class OpenES:
         normaliser = self.population_size * state.sigma
         theta, optimizer_state = state.theta, state.optimizer
         if shaped is not None:
+            weighted_sum = self.weighted_noise(shaped, indices, noise, theta.size)
             with np.errstate(over="ignore", invalid="ignore"):  # a non-finite step is the caller's to refuse
-                theta, optimizer_state = self.optimizer(theta, self.weighted_noise(shaped, indices, noise, theta.size),
-                                                        normaliser, state.lr, optimizer_state)
+                theta, optimizer_state = self.optimizer.step(theta, weighted_sum, self.population_size, state.sigma,
+                                                             state.lr, optimizer_state)
         new_state = replace(state, theta=theta, lr=decay_lr(state.lr, self.settings),
                             sigma=decay_sigma(state.sigma, self.settings), generation=state.generation + 1,
                             optimizer=optimizer_state)

@@ -1,14 +1,17 @@
 """What a worker does with a task: rebuild the member's parameters from the noise table, run the episode.
 
 The wire protocol (DESIGN.md) is the same for every backend. Per generation the runner publishes
-theta and sigma once; a task is then one record of ``TASK_DTYPE``
+theta, sigma and, with ``--obs_norm``, the observation statistics (mean, std) once; a task is then
+one record of ``TASK_DTYPE``
 
-    (member, noise_index, sign, env_index, seed)
+    (member, noise_index, sign, env_index, seed, record_obs)
 
-and its outcome ``("result", (return, env steps, L2 penalty))`` or ``("error", message)``.
-``noise_index < 0`` is the unperturbed centre, theta itself. The L2 penalty of the original's fitness,
-mean(theta_m^2) over the policy's penalised part, is computed here, where the member's parameters
-already exist, so that the runner never rebuilds a perturbed vector.
+and its outcome ``("result", (return, env steps, L2 penalty, observation sums))`` or
+``("error", message)``. ``noise_index < 0`` is the unperturbed centre, theta itself. The L2 penalty
+of the original's fitness, mean(theta_m^2) over the policy's penalised part, is computed here, where
+the member's parameters already exist, so that the runner never rebuilds a perturbed vector. The
+observation sums (sum, sum of squares, count; ``es.observations``) are those of the observations
+the policy acted on, for a task with ``record_obs`` set, and None otherwise.
 """
 
 from __future__ import annotations
@@ -22,18 +25,21 @@ from es.noise import NoiseTable
 from es.shaping import l2_penalty
 
 TASK_DTYPE = np.dtype([("member", np.int64), ("noise_index", np.int64), ("sign", np.int64),
-                       ("env_index", np.int64), ("seed", np.int64)])
-Outcome = tuple[str, object]  # ("result", (return, steps, penalty)) or ("error", message)
+                       ("env_index", np.int64), ("seed", np.int64), ("record_obs", np.int64)])
+Outcome = tuple[str, object]  # ("result", (return, steps, penalty, observation sums)) or ("error", message)
+Statistics = tuple[np.ndarray, np.ndarray]  # (mean, std) of the observations, as published
 
 
 def make_tasks(members: np.ndarray, noise_indices: np.ndarray, signs: np.ndarray,
-               seeds: np.ndarray, n_envs: int) -> np.ndarray:
+               seeds: np.ndarray, n_envs: int, record: np.ndarray | None = None) -> np.ndarray:
     """All episodes of a generation: every member on every env and seed, member-major.
 
     ``seeds[m]`` are member m's episode seeds (shape (members, episodes)); mirrored members get the
-    same seeds.
+    same seeds. ``record[m]`` (shaped as ``seeds``; default none) says which of member m's episodes
+    add their observations to the statistics, on every environment.
     """
     seeds = np.asarray(seeds, dtype=np.int64)
+    record = np.zeros(seeds.shape, dtype=bool) if record is None else np.asarray(record, dtype=bool)
     per_member = n_envs * seeds.shape[1]
     tasks = np.empty(len(members) * per_member, dtype=TASK_DTYPE)
     tasks["member"] = np.repeat(members, per_member)
@@ -41,6 +47,7 @@ def make_tasks(members: np.ndarray, noise_indices: np.ndarray, signs: np.ndarray
     tasks["sign"] = np.repeat(signs, per_member)
     tasks["env_index"] = np.tile(np.repeat(np.arange(n_envs), seeds.shape[1]), len(members))
     tasks["seed"] = np.repeat(seeds[:, None, :], n_envs, axis=1).reshape(-1)
+    tasks["record_obs"] = np.repeat(record[:, None, :], n_envs, axis=1).reshape(-1)
     return tasks
 
 
@@ -87,13 +94,18 @@ class Worker:
             self._cached = key
         return self._params
 
-    def run(self, generation: int, sigma: float, task: np.void) -> Outcome:
-        """("result", (return, steps, penalty)), or ("error", message) after remaking the environment."""
+    def run(self, generation: int, sigma: float, task: np.void, statistics: Statistics | None = None) -> Outcome:
+        """("result", (return, steps, penalty, observation sums)), or ("error", message) after remaking
+        the environment. ``statistics``: the published (mean, std) of the observations, with --obs_norm."""
         env_index = int(task["env_index"])
         try:
             params = self.params(generation, sigma, int(task["member"]), int(task["noise_index"]), int(task["sign"]))
+            policy = self.problem.policy
+            if statistics is not None:
+                policy.observe(statistics, record=bool(task["record_obs"]))
             episode = self.problem.evaluate(params, env_index, int(task["seed"]))
-            return "result", (episode.total_return, episode.steps, self._penalty)
+            sums = policy.recorded() if statistics is not None else None
+            return "result", (episode.total_return, episode.steps, self._penalty, sums)
         except Exception as error:  # reported to the runner, which retries once, then stops the run
             message = f"{type(error).__name__}: {error}"
             try:

@@ -23,6 +23,7 @@ class Policy(Protocol):
     penalised: slice  # the parameters the ES's fitness penalty covers
     penalised_name: str  # what those are called in the generation line ("w", "coeffs")
     roles: tuple[str, ...]  # the arrays ``export`` writes and ``load`` reads, one file each
+    normalised_inputs: int  # how many observations it normalises (``policies.normalised``); 0: none
 
     def initial_params(self, rng: np.random.Generator) -> np.ndarray:
         """Generation 0's parameter vector."""

@@ -50,6 +50,7 @@ class HebbianState:
 
 class HebbianPolicy:
     penalised_name = "coeffs"
+    normalised_inputs = 0
 
     def __init__(self, net: NetworkSpec, rule: str = "ABCD_lr", init_weights: str = "uni",
                  normalise: bool = True, distribution: str = "normal"):

@@ -19,6 +19,7 @@ from policies.base import Policy
 from policies.hebbian import HebbianPolicy
 from policies.network import NetworkSpec
 from policies.pytorch_es import ConvLSTMPolicy, SmallNetPolicy
+from policies.normalised import NormalisedInputs
 from policies.static import StaticPolicy
 
 
@@ -42,6 +43,12 @@ class PolicySettings:
     init_weights: str = "uni"  # Hebbian kinds: each episode's initial weights
     distribution: str = "normal"  # Hebbian kinds: generation 0's coefficients (and CNN / co-evolved weights)
     network: str = "default"  # static kinds: the network's shape, NETWORKS
+    obs_norm: bool = False  # the input layer sees (obs - mean) / std (``policies.normalised``); not for pixels
+    obs_clip: float | None = None  # with obs_norm: clip the normalised observations to +-obs_clip
+
+    def __post_init__(self) -> None:
+        if self.obs_clip is not None and not 0 < self.obs_clip < float("inf"):
+            raise ValueError(f"--obs_clip must be a number > 0, got {self.obs_clip}")
 
 
 @dataclass(frozen=True)
@@ -79,5 +86,9 @@ def preprocessing(settings: PolicySettings) -> str:
 
 def make_policy(settings: PolicySettings, net: NetworkSpec, normalise: bool = True) -> Policy:
     """The policy ``settings`` name, for a network ``net``; ``normalise``: the environment's Hebbian
-    weight normalisation (upstream spec §4.3), used by plastic kinds only."""
-    return kind_of(settings).build(settings, net, normalise)
+    weight normalisation (upstream spec §4.3), used by plastic kinds only. With ``obs_norm`` a
+    vector-input network sees normalised observations; a pixel network is left as it is."""
+    policy = kind_of(settings).build(settings, net, normalise)
+    if settings.obs_norm and not net.pixels:
+        return NormalisedInputs(policy, net.obs_shape[0], settings.obs_clip)
+    return policy

@@ -46,6 +46,7 @@ class WeightFile:
     penalised_name = "w"
     roles = ("weights",)
     num_params: int
+    normalised_inputs = 0
 
     def export(self, params: np.ndarray) -> dict[str, np.ndarray]:
         return {"weights": np.asarray(params, dtype=np.float32).copy()}

@@ -13,12 +13,16 @@ from report.plots import save_run_plot
 
 def generation_line(row: dict) -> str:
     """The original's line (iter, reward, update_factor, lr, sum and sum of |.| of the penalised
-    parameters: weights or Hebbian coefficients), then the centre's return, env steps and seconds."""
+    parameters: weights or Hebbian coefficients), then the centre's return and rank among the
+    N + 1 (``--eval_every`` generations: its evaluation mean ± std too), env steps and seconds."""
     name = row["parameters_name"]
+    evaluation = (f" | eval: {row['center_eval_mean']:.2f} ± {row['center_eval_std']:.2f}"
+                  if row["center_eval_mean"] == row["center_eval_mean"] else "")  # NaN: not evaluated
     line = (f"iter {row['generation']} | reward: {row['fitness_mean']:.3f} | "
             f"update_factor: {row['update_factor']:.6f} | lr: {row['lr']:g} | "
             f"sum_{name}: {row['parameters_sum']:.3f} | sum_abs_{name}: {row['parameters_abs_sum']:.3f} | "
-            f"center: {row['center_return']:.2f} | steps: {row['env_steps']} | {row['seconds']:.1f}s")
+            f"center: {row['center_return']:.2f} (rank {row['center_rank']}){evaluation} | "
+            f"steps: {row['env_steps']} | {row['seconds']:.1f}s")
     if row["nonfinite"]:
         line += f" | {row['nonfinite']} non-finite returns ranked last"
     if row["skipped"]:
@@ -38,6 +42,9 @@ class GenerationLog:
     def saved(self, folder, rows: list[dict]) -> None:
         pass
 
+    def close(self) -> None:
+        pass
+
 
 class FitnessPlot:
     """Redraws the run's ``fitness.png`` at every save."""
@@ -47,3 +54,6 @@ class FitnessPlot:
 
     def saved(self, folder, rows: list[dict]) -> None:
         folder.write(save_run_plot, "fitness.png", rows, folder.name)
+
+    def close(self) -> None:
+        pass

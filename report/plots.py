@@ -2,8 +2,10 @@
 
 Fitness is what the strategy ranks: the mean episode return minus the L2 penalty (``es.shaping``).
 One run's picture shows, per generation, the population's mean, the band between its min and
-max, the best fitness seen so far, and the return of the unperturbed centre theta (the one that
-picks ``best.dat``). The comparison overlays the mean and best-so-far of several runs.
+max, the best fitness seen so far, the return of the unperturbed centre theta, and, with
+``--eval_every``, the centre's evaluation mean with a band of one standard deviation (which then
+picks ``best.dat``). The comparison overlays the mean and best-so-far of several runs. Columns a
+metrics.csv of an earlier version lacks, or a generation left empty, read as NaN.
 
 Drawing uses matplotlib's Agg canvas directly (no pyplot, so no global state and no display), and
 the PNG is written atomically like every other file of a run.
@@ -25,11 +27,12 @@ WIDTH, HEIGHT, DPI = 8, 4.5, 100
 def curves(rows: Sequence[dict]) -> dict[str, np.ndarray]:
     """Columns of metrics rows (as written, or as read back from the CSV) as float arrays."""
     def column(name: str) -> np.ndarray:
-        return np.array([float(row[name]) for row in rows], dtype=np.float64)
+        return np.array([float(row.get(name) or "nan") for row in rows], dtype=np.float64)
 
     maximum = column("fitness_max")
     return {"generation": column("generation"), "mean": column("fitness_mean"), "max": maximum,
             "min": column("fitness_min"), "center": column("center_return"),
+            "eval_mean": column("center_eval_mean"), "eval_std": column("center_eval_std"),
             "best": np.fmax.accumulate(maximum) if maximum.size else maximum}  # fmax skips NaN
 
 
@@ -64,6 +67,11 @@ def run_figure(rows: Sequence[dict], title: str):
     axes.plot(x, data["mean"], color="C0", label="population mean")
     axes.plot(x, data["best"], color="C3", linestyle="--", label="best so far")
     axes.plot(x, data["center"], color="C2", linestyle=":", label="centre return")
+    evaluated = np.isfinite(data["eval_mean"])
+    if evaluated.any():
+        mean, std = data["eval_mean"][evaluated], data["eval_std"][evaluated]
+        axes.fill_between(x[evaluated], mean - std, mean + std, color="C1", alpha=0.25, linewidth=0)
+        axes.plot(x[evaluated], mean, color="C1", marker=".", label="centre evaluation mean ± std")
     _legend_outside(axes)
     return figure
 

@@ -23,6 +23,8 @@ from typing import Callable, Iterable, Protocol
 
 import numpy as np
 
+from es.worker import Statistics
+
 MAX_ATTEMPTS = 2
 CHUNK_SECONDS = 0.1
 
@@ -31,12 +33,14 @@ Progress = Callable[[int, int], None]  # (episodes just finished, their env step
 
 @dataclass(frozen=True)
 class Generation:
-    """One generation's work: theta and sigma are published once, the tasks say what to run."""
+    """One generation's work: theta, sigma and the observation statistics are published once, the
+    tasks say what to run."""
 
     number: int  # generations done before this one
     theta: np.ndarray  # float32
     sigma: float
     tasks: np.ndarray  # es.worker.TASK_DTYPE
+    statistics: Statistics | None = None  # --obs_norm: (mean, std) the policies normalise with
 
 
 @dataclass
@@ -44,11 +48,13 @@ class Results:
     returns: np.ndarray  # float64, task order
     steps: np.ndarray  # int64, task order
     penalties: np.ndarray  # float64, task order: mean(theta_m^2) over the penalised parameters
-    warnings: list[str] = field(default_factory=list)  #: episodes that failed once, workers lost
+    warnings: list[str] = field(default_factory=list)  # episodes that failed once, workers lost
+    observations: list = field(default_factory=list)  # task order: the episode's observation sums, or None
 
     @classmethod
     def empty(cls, n_tasks: int) -> "Results":
-        return cls(np.zeros(n_tasks), np.zeros(n_tasks, dtype=np.int64), np.zeros(n_tasks))
+        return cls(np.zeros(n_tasks), np.zeros(n_tasks, dtype=np.int64), np.zeros(n_tasks),
+                   observations=[None] * n_tasks)
 
 
 class Evaluator(Protocol):
@@ -110,9 +116,10 @@ class TaskBook:
             self.failed(index, payload)
             self.waiting.appendleft(index)
             return
-        total_return, steps, penalty = payload
+        total_return, steps, penalty, observations = payload
         results = self.results
         results.returns[index], results.steps[index], results.penalties[index] = total_return, steps, penalty
+        results.observations[index] = observations
         self.remaining -= 1
         if self._progress is not None:
             self._progress(1, steps)

@@ -54,9 +54,9 @@ def _worker_main(conn, build_problem, noise_name: str, noise_size: int, theta_na
             break
         if message is None:
             break
-        generation, sigma, chunk = message
+        generation, sigma, statistics, chunk = message
         for task in chunk:
-            conn.send(worker.run(generation, sigma, task))
+            conn.send(worker.run(generation, sigma, task, statistics))
         conn.send(("done", None))
     worker.close()
 
@@ -127,7 +127,7 @@ class ProcessEvaluator:
             while idle and book.waiting:
                 slot = idle.pop()
                 slot.chunk = collections.deque(book.next_chunk(size))
-                slot.conn.send((generation.number, generation.sigma, tasks[list(slot.chunk)]))
+                slot.conn.send((generation.number, generation.sigma, generation.statistics, tasks[list(slot.chunk)]))
                 busy[slot.conn] = busy[slot.process.sentinel] = slot
             for ready in connection.wait(list(busy)):
                 slot = busy.get(ready)

@@ -8,7 +8,8 @@ DESIGN.md unchanged:
   are made once per run;
 - the noise table is put in the object store once per run; actors on the same node read it in
   place (zero-copy, read-only), actors on other nodes fetch it once;
-- theta is put once per generation and only its reference travels with each chunk;
+- theta is put once per generation and only its reference travels with each chunk (with the
+  observation statistics of ``--obs_norm``, two vectors of the observation's size);
 - a chunk is task rows and their indices, and comes back as (task index, kind, payload) per task;
 - chunks hold about 0.1 s of work (``ChunkSizer``, shared with the process pool), are handed out
   as actors finish (``ray.wait``), and results are written back by task index, so the outcome is
@@ -137,11 +138,12 @@ class _WorkerActor:
         """None once the environments are made, else why they could not be."""
         return self.failure
 
-    def run(self, generation: int, sigma: float, theta: np.ndarray, indices: list[int],
+    def run(self, generation: int, sigma: float, theta: np.ndarray, statistics, indices: list[int],
             rows: np.ndarray) -> list[tuple[int, str, object]]:
-        """Run a chunk; (task index, "result", (return, steps, penalty)) or (task index, "error", message)."""
+        """Run a chunk; (task index, "result", (return, steps, penalty, observation sums)) or
+        (task index, "error", message)."""
         self.worker.theta = theta  # Ray resolved the generation's reference: a read-only view
-        return [(index, *self.worker.run(generation, sigma, row)) for index, row in zip(indices, rows)]
+        return [(index, *self.worker.run(generation, sigma, row, statistics)) for index, row in zip(indices, rows)]
 
 
 _RemoteWorker = ray.remote(num_cpus=1, max_restarts=0)(_WorkerActor)
@@ -197,7 +199,8 @@ class RayEvaluator:
         while book.remaining:
             while idle and book.waiting:
                 actor, indices = idle.pop(), book.next_chunk(size, alone=suspects)
-                reference = actor.run.remote(generation.number, generation.sigma, theta_ref, indices, tasks[indices])
+                reference = actor.run.remote(generation.number, generation.sigma, theta_ref, generation.statistics,
+                                             indices, tasks[indices])
                 in_flight[reference] = actor, indices
             done, _ = ray.wait([*in_flight, *self._starting], num_returns=1, timeout=WAIT_SECONDS)
             for ref in done:

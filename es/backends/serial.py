@@ -24,7 +24,8 @@ class SerialEvaluator:
         book = TaskBook(generation.tasks, self.env_ids, progress)
         while book.waiting:
             index = book.waiting.popleft()
-            book.record(index, *self._worker.run(generation.number, generation.sigma, generation.tasks[index]))
+            book.record(index, *self._worker.run(generation.number, generation.sigma, generation.tasks[index],
+                                                 generation.statistics))
         return book.results
 
     def close(self) -> None:

@@ -1,0 +1,63 @@
+"""``--tensorboard``: every metrics column as a TensorBoard scalar, under ``<run folder>/tensorboard``.
+
+A reporter of the generation loop (``es.loop.Reporter``), like ``report.log``'s: it receives each
+generation's metrics row and writes one scalar per numeric column (``metrics.csv``'s columns, the
+generation as the step); values a generation does not have (NaN, empty) are left out. The writer is
+PyTorch's ``SummaryWriter``, which needs the optional ``tensorboard`` package
+(``requirements-tensorboard.txt``). After a resume, the generations between the checkpoint and the
+stop are written again: TensorBoard shows the later points.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+from pathlib import Path
+
+from es.files import METRICS_COLUMNS
+
+FOLDER = "tensorboard"
+INSTALL_HINT = "pip install -r requirements-tensorboard.txt (or pip install -e .[tensorboard])"
+
+
+def available() -> bool:
+    return importlib.util.find_spec("tensorboard") is not None
+
+
+def scalars(row: dict) -> dict[str, float]:
+    """The row's numeric, finite columns, but the step itself."""
+    found = {}
+    for name in METRICS_COLUMNS[1:]:
+        try:
+            value = float(row.get(name))
+        except (TypeError, ValueError):  # absent, empty or not a number
+            continue
+        if math.isfinite(value):
+            found[name] = value
+    return found
+
+
+class TensorBoardLog:
+    """Writes each generation's metrics row as scalars; flushes at every save. The writer (and its
+    folder) is made at the first generation, so a run that fails to start leaves nothing behind."""
+
+    def __init__(self, run_folder: Path):
+        self.path = Path(run_folder) / FOLDER
+        self.writer = None
+
+    def generation(self, row: dict) -> None:
+        if self.writer is None:
+            from torch.utils.tensorboard import SummaryWriter
+
+            self.writer = SummaryWriter(log_dir=str(self.path))
+        step = int(row["generation"])
+        for name, value in scalars(row).items():
+            self.writer.add_scalar(name, value, step)
+
+    def saved(self, folder, rows: list[dict]) -> None:
+        if self.writer is not None:
+            self.writer.flush()
+
+    def close(self) -> None:
+        if self.writer is not None:
+            self.writer.close()
