@@ -41,9 +41,15 @@ def missing_packages(modules: dict[str, str]) -> list[str]:
 
 
 def run_script(script: str, argv: list[str] | None = None) -> int:
-    """Entry point of ``scripts/<script>.py``: one line and exit code 2 if the optional extra is missing."""
+    """Entry point of ``scripts/<script>.py``: one line and exit code 2 if the optional extra is missing.
+
+    A SIGTERM (what cluster schedulers send) stops a script as Ctrl-C does, so that optuna marks the
+    trial it interrupts as failed instead of leaving it running in the journal forever.
+    """
+    import signal
     import sys
 
+    signal.signal(signal.SIGTERM, _interrupt)
     missing = missing_packages(TEST_MODULES if script.startswith("test") else EXTRA_MODULES)
     if missing:
         print(f"{script}.py: error: the ER-MRL scripts need {', '.join(missing)}, not installed here; {INSTALL_HINT}",
@@ -52,3 +58,7 @@ def run_script(script: str, argv: list[str] | None = None) -> int:
     from reservoirs.commands import main
 
     return main(script, argv)
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
