@@ -303,6 +303,25 @@ def load_test_setup(args: argparse.Namespace, name: str, evolve_hint: str, env_i
     return TestSetup(study, reservoirs, front_end, del_obs, recorded.get("ep_eval", 10))
 
 
+def train_test_model(setup: TestSetup, env_id: str, seed: int, training_steps: int, model_name: str,
+                     learning_rate: float, logdir: Path, model_path: Path) -> dict:
+    """One model of a test script: PPO, with the study's reservoirs if its name starts with RES; saved."""
+    start = time.perf_counter()
+    env = make_base_env(env_id, setup.del_obs)
+    if model_name.startswith("RES"):
+        env = setup.front_end.wrap(env, setup.reservoirs, seed)
+    env = RewardsSavingWrapper(env)
+    train_ppo(env, seed, training_steps, learning_rate, str(logdir), model_path.stem).save(model_path)
+    env.close()
+    episodes = len(env.episode_returns)
+    mean_return = env.mean_reward(setup.ep_eval) if episodes else None
+    score = (f"mean return of the last {min(setup.ep_eval, episodes)} of {episodes} episodes {mean_return:.2f}"
+             if episodes else "no episode finished")
+    log(f"{model_name}: {score} ({time.perf_counter() - start:.1f} s) | {model_path}")
+    return {"learning_rate": learning_rate, "episodes": episodes, f"mean_return_last_{setup.ep_eval}": mean_return,
+            "file": model_path.name}
+
+
 def test_models(args: argparse.Namespace, name: str, evolve_hint: str, several: bool, nb_res: int,
                 fixed_iss_default: bool, models: dict[str, float]) -> int:
     """Train each of ``models`` on ``--env_id``; the shared body of the three test scripts."""
@@ -317,19 +336,9 @@ def test_models(args: argparse.Namespace, name: str, evolve_hint: str, several: 
     steps_label = f"{args.training_steps // 1000}k_steps_seed_{seed}"
     results = {}
     for model_name, learning_rate in (MODELS_DEL_OBS if setup.del_obs else models).items():
-        start = time.perf_counter()
-        env = make_base_env(env_id, setup.del_obs)
-        if model_name.startswith("RES"):
-            env = setup.front_end.wrap(env, setup.reservoirs, seed)
-        env = RewardsSavingWrapper(env)
         run_name = f"{model_name}_{steps_label}"
-        train_ppo(env, seed, args.training_steps, learning_rate, str(logdir), run_name).save(models_dir / f"{run_name}.zip")
-        env.close()
-        mean_return = env.mean_reward(setup.ep_eval)
-        results[model_name] = {"learning_rate": learning_rate, "episodes": len(env.episode_returns),
-                               f"mean_return_last_{setup.ep_eval}": mean_return, "file": f"{run_name}.zip"}
-        log(f"{model_name}: mean return of the last {setup.ep_eval} episodes {mean_return:.2f} "
-            f"({len(env.episode_returns)} episodes, {time.perf_counter() - start:.1f} s) | {models_dir / run_name}.zip")
+        results[model_name] = train_test_model(setup, env_id, seed, args.training_steps, model_name, learning_rate,
+                                               logdir, models_dir / f"{run_name}.zip")
     best = setup.study.best_trial
     summary_path = models_dir / f"test_{steps_label}.json"
     write_json(summary_path, {
