@@ -1,0 +1,14 @@
+"""ER-MRL's evolve_multi_res.py: evolve several reservoirs read by one agent, on one environment.
+
+Run from anywhere, e.g. `python scripts/evolve_multi_res.py --help`; README "Evolved reservoirs (ER-MRL)".
+"""
+
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the repository root, for `reservoirs`
+
+from reservoirs import run_script  # noqa: E402
+
+if __name__ == "__main__":
+    sys.exit(run_script("evolve_multi_res"))

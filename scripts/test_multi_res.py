@@ -1,0 +1,14 @@
+"""ER-MRL's test_multi_res.py: train PPO with and without the best reservoirs evolved by evolve_multi_res.py.
+
+Run from anywhere, e.g. `python scripts/test_multi_res.py --help`; README "Evolved reservoirs (ER-MRL)".
+"""
+
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the repository root, for `reservoirs`
+
+from reservoirs import run_script  # noqa: E402
+
+if __name__ == "__main__":
+    sys.exit(run_script("test_multi_res"))
