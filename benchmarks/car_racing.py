@@ -42,7 +42,8 @@ import gymnasium as gym  # noqa: E402
 from envs import ProblemSpec  # noqa: E402
 from envs.make import STOCK_CAR_RACING_ID as STOCK_ID  # noqa: E402
 from envs.wrappers import CarRacingAction, PixelObservation  # noqa: E402
-from es.evaluator import SerialEvaluator  # noqa: E402
+from es.backends import Generation, SerialEvaluator  # noqa: E402
+from policies import PolicySettings  # noqa: E402
 from es.noise import NoiseTable  # noqa: E402
 from throughput import generation_tasks  # noqa: E402  (benchmarks/throughput.py)
 
@@ -93,25 +94,25 @@ def env_rates(rounds: int, steps: int) -> tuple[list[float], list[float]]:
 
 def loop_rates(kind: str, rounds: int, popsize: int) -> tuple[list[float], list[float], float]:
     """Training-loop steps per CPU second with each class, per round, and the mean episode length."""
-    specs = [ProblemSpec((env_id,), kind) for env_id in (STOCK_ID, FAST_ID)]
+    specs = [ProblemSpec((env_id,), PolicySettings(kind)) for env_id in (STOCK_ID, FAST_ID)]
     problem = specs[0].build()
-    theta = problem.policy.initial_params(np.random.default_rng(0), "normal")
+    theta = problem.policy.initial_params(np.random.default_rng(0))
     problem.close()
     noise = NoiseTable.create(0, max(1 << 20, 4 * theta.size))
     evaluators = [SerialEvaluator(spec.build, noise, theta.size, spec.env_ids) for spec in specs]
     tasks = generation_tasks(popsize, theta.size, noise, np.random.default_rng(1))
     for evaluator in evaluators:  # warm-up: compilation, first resets
-        evaluator.evaluate(0, theta, 0.1, tasks[:1])
+        evaluator.evaluate(Generation(0, theta, 0.1, tasks[:1]))
     rates: list[list[float]] = [[], []]
     steps = 0
     try:
         for _ in range(rounds):
             seconds, steps = [0.0, 0.0], 0
-            for task in tasks:
-                returns = []
+            for number in range(len(tasks)):
+                task, returns = tasks[number:number + 1], []
                 for index, evaluator in enumerate(evaluators):
                     started = time.process_time()
-                    results = evaluator.evaluate(0, theta, 0.1, task[None])
+                    results = evaluator.evaluate(Generation(0, theta, 0.1, task))
                     seconds[index] += time.process_time() - started
                     returns.append(results.returns[0])
                 if returns[0] != returns[1]:
@@ -128,7 +129,7 @@ def loop_rates(kind: str, rounds: int, popsize: int) -> tuple[list[float], list[
 
 def policy_share(kind: str, steps: int) -> dict[str, float]:
     """CPU seconds per step of the fast class: env.step, the resize, the network (with its update)."""
-    problem = ProblemSpec((FAST_ID,), kind).build()
+    problem = ProblemSpec((FAST_ID,), PolicySettings(kind)).build()
     chain = problem.envs[0]
     wrappers = []
     while isinstance(chain, gym.Wrapper):
@@ -137,7 +138,7 @@ def policy_share(kind: str, steps: int) -> dict[str, float]:
     pixels = next(w for w in wrappers if isinstance(w, PixelObservation))
     squash = next(w for w in wrappers if isinstance(w, CarRacingAction))
     env, policy = pixels.env, problem.policy  # env: the fast class with Gymnasium's own wrappers
-    params = policy.initial_params(np.random.default_rng(0), "normal")
+    params = policy.initial_params(np.random.default_rng(0))
     frame, _ = env.reset(seed=0)  # untimed warm-up: numba's kernels, torch's first convolution
     policy.act(params, policy.reset(params, np.random.default_rng(0)), pixels.observation(frame))
     totals = {"env.step": 0.0, "resize": 0.0, "network": 0.0}

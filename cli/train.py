@@ -75,9 +75,11 @@ def add_modern_options(parser: Parser) -> None:
     add = group.add_argument
     add("--shaping", choices=list(SHAPINGS), default=ESSettings.shaping,
         help="fitness shaping: rank_std (the original: centered ranks, standardised), rank (OpenAI's centered "
-             "ranks), none (the fitness, standardised)")
+             "ranks), none (the fitness, standardised), nes (pytorch-es's NES utilities)")
     add("--optimizer", choices=list(OPTIMIZERS), default=ESSettings.optimizer,
         help="sgd (the original), adam or momentum (OpenAI's; gradient sum F*eps / N); --lr is the step size")
+    add("--useAdam", dest="optimizer", action="store_const", const="adam",
+        help="pytorch-es's flag: the same as --optimizer adam")
     add("--beta1", type=float, default=ESSettings.beta1, help="with --optimizer adam, in [0, 1)")
     add("--beta2", type=float, default=ESSettings.beta2, help="with --optimizer adam, in [0, 1)")
     add("--momentum", type=float, default=ESSettings.momentum, help="with --optimizer momentum, in [0, 1)")
@@ -98,6 +100,9 @@ def add_modern_options(parser: Parser) -> None:
         help="with --eval_every: the centre's evaluation episodes")
     add("--max_episode_steps", type=int, default=None, metavar="N",
         help="end an episode (as truncated) after N policy steps; default the environment's own limit")
+    add("--variable_ep_len", action="store_true",
+        help="pytorch-es's adaptive episode length: each generation's episodes end after twice the mean length "
+             "of the last generation's perturbed episodes")
     add("--tensorboard", action="store_true",
         help=f"also write every metrics column as TensorBoard scalars in <run>/tensorboard ({tensorboard.INSTALL_HINT})")
 
@@ -121,9 +126,13 @@ def check_needs(values: dict, given: set[str]) -> None:
             raise UserError(f"--{name} has an effect only with {needed}; add {needed} or leave --{name} out")
 
 
+ALIASES = {"useAdam": "optimizer"}  # another program's flag -> the setting it gives
+
+
 def given_flags(argv: list[str]) -> set[str]:
-    """The names of the flags on the command line (``--lr 0.1`` and ``--lr=0.1`` alike)."""
-    return {item[2:].split("=")[0] for item in argv if item.startswith("--")}
+    """The settings the command line gives (``--lr 0.1`` and ``--lr=0.1`` alike; aliases by their setting)."""
+    names = {item[2:].split("=")[0] for item in argv if item.startswith("--")}
+    return {ALIASES.get(name, name) for name in names}
 
 
 def resolve_environments(text: str) -> tuple[str, ...]:

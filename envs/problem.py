@@ -76,8 +76,8 @@ class Problem:
         """Each environment's wrapper stack (recorded in config.json)."""
         return {env_id: wrapper_stack(env) for env_id, env in zip(self.spec.env_ids, self.envs)}
 
-    def evaluate(self, params, env_index: int, seed: int) -> Episode:
-        return rollout(self.envs[env_index], self.policy, params, seed)
+    def evaluate(self, params, env_index: int, seed: int, max_steps: int | None = None) -> Episode:
+        return rollout(self.envs[env_index], self.policy, params, seed, max_steps=max_steps)
 
     def rebuild(self, env_index: int) -> None:
         """Replace an environment that raised by a fresh one."""

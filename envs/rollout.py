@@ -25,10 +25,13 @@ def episode_rng(seed: int) -> np.random.Generator:
 
 
 def rollout(env: gym.Env, policy, params: np.ndarray, seed: int,
-            observer: Callable[[int, float, object, dict], None] | None = None) -> Episode:
+            observer: Callable[[int, float, object, dict], None] | None = None,
+            max_steps: int | None = None) -> Episode:
     """Run one episode of ``policy`` with ``params`` on ``env``, reset with ``seed``.
 
     ``observer(t, reward, state, info)``, if given, is called after every step (evaluation plots).
+    ``max_steps`` ends the episode after that many policy steps (``--variable_ep_len``'s cap, which
+    changes from one generation to the next; a fixed cap is ``envs.wrappers.MaxEpisodeSteps``).
     """
     observation, info = env.reset(seed=int(seed))
     burn_in = int(info.get("burn_in_steps", 0))
@@ -42,6 +45,6 @@ def rollout(env: gym.Env, policy, params: np.ndarray, seed: int,
         steps += 1
         if observer is not None:
             observer(steps, float(reward), state, info)
-        if terminated or truncated:
+        if terminated or truncated or steps == max_steps:
             break
     return Episode(float(total), steps + burn_in)

@@ -187,8 +187,8 @@ def read_json(path: Path) -> dict:
 METRICS_COLUMNS = ("generation", "fitness_mean", "fitness_max", "fitness_min", "fitness_std",
                    "return_mean", "center_return", "sigma", "lr", "update_factor", "skipped",
                    "nonfinite", "env_steps", "total_env_steps", "seconds", "total_seconds",
-                   "center_rank", "center_eval_mean", "center_eval_std")
-LATER_COLUMNS = ("center_rank", "center_eval_mean", "center_eval_std")  # absent from earlier versions' files
+                   "center_rank", "center_eval_mean", "center_eval_std", "episode_cap")
+LATER_COLUMNS = ("center_rank", "center_eval_mean", "center_eval_std", "episode_cap")  # absent from earlier files
 
 
 def write_metrics(path: Path, rows: list[dict]) -> None:

@@ -135,7 +135,7 @@ class Trainer:
         center_seeds = rng.integers(0, SEED_LIMIT, size=(1, self.es.episodes))
         tasks = make_tasks(np.arange(popsize + 1), np.append(indices, -1), np.append(signs, 0),
                            np.concatenate([np.repeat(pair_seeds, 2, axis=0), center_seeds]), self.n_envs,
-                           self._recorded_pairs(state.generation, pair_seeds.shape))
+                           self._recorded_pairs(state.generation, pair_seeds.shape), cap := self.history.episode_cap)
         training_tasks = len(tasks)
         tasks = np.concatenate([tasks, self._evaluation_tasks(state.generation)])
         statistics = self.observations.published() if self.observations is not None else None
@@ -152,7 +152,10 @@ class Trainer:
         center = self._center(state, returns, results.returns[training_tasks:])
         if self.observations is not None:
             self.observations = self.observations.merged(results.observations)
-        return self._record(fitness, returns[:popsize], center, info, int(results.steps.sum()),
+        if self.es.variable_ep_len:  # pytorch-es: twice the mean length of the perturbed episodes
+            member_tasks = training_tasks - training_tasks // (popsize + 1)
+            self.history.episode_cap = max(1, int(2 * results.steps[:member_tasks].mean()))
+        return self._record(fitness, returns[:popsize], center, info, int(results.steps.sum()), cap,
                             time.perf_counter() - started)
 
     def _recorded_pairs(self, generation: int, shape: tuple[int, int]) -> np.ndarray | None:
@@ -195,7 +198,7 @@ class Trainer:
         return results
 
     def _record(self, fitness: np.ndarray, returns: np.ndarray, center: CenterReport, info: dict, steps: int,
-                seconds: float) -> dict:
+                episode_cap: int, seconds: float) -> dict:
         """Append the generation's metrics row, rewrite metrics.csv, tell the reporters."""
         history, after, finite = self.history, self.state, np.isfinite(fitness)
         history.total_steps += steps
@@ -213,7 +216,8 @@ class Trainer:
                    nonfinite=int((~finite).sum()), env_steps=steps, total_env_steps=history.total_steps,
                    seconds=round(seconds, 3), total_seconds=round(history.total_seconds, 3),
                    parameters_name=self.policy.penalised_name, parameters_sum=float(penalised.sum()),
-                   parameters_abs_sum=float(np.abs(penalised).sum()))
+                   parameters_abs_sum=float(np.abs(penalised).sum()), episode_cap=episode_cap,
+                   population=self.es.popsize)
         history.metrics.append(row)
         if after.generation % self.run.print_every == 0:
             history.fitness_log.append(row["fitness_mean"])

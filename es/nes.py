@@ -27,6 +27,6 @@ def nes_utilities(fitness: np.ndarray) -> np.ndarray | None:
     population = fitness.size
     if population == 0 or np.all(fitness == fitness[0]):
         return None
-    ranks = 1 + np.sum(fitness[None, :] > fitness[:, None], axis=1)  # 1 + how many are strictly better
+    ranks = 1 + population - np.searchsorted(np.sort(fitness), fitness, side="right")  # 1 + how many are better
     numerators = np.maximum(0.0, np.log2(population / 2 + 1) - np.log2(ranks))
     return numerators / numerators.sum() + 1.0 / population

@@ -17,7 +17,7 @@ import math
 import shutil
 import time
 import typing
-from dataclasses import dataclass, field, fields
+from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
 from typing import Callable
 
@@ -47,6 +47,7 @@ class History:
     metrics: list[dict] = field(default_factory=list)
     total_steps: int = 0
     total_seconds: float = 0.0
+    episode_cap: int = 0  # --variable_ep_len: the next generation's cap on policy steps (0: none yet)
 
 
 @dataclass
@@ -65,6 +66,7 @@ class Checkpoint:
     optimizer: dict[str, np.ndarray] = field(default_factory=dict)  # e.g. Adam's m, v and t
     observations: dict[str, np.ndarray] = field(default_factory=dict)  # --obs_norm: RunningStat's sums
     best_observations: dict[str, np.ndarray] = field(default_factory=dict)  # those best_theta was evaluated with
+    episode_cap: int = 0  # --variable_ep_len: the next generation's cap (0: none)
 
     @classmethod
     def of(cls, state: ESState, history: History, observations: RunningStat | None = None) -> "Checkpoint":
@@ -74,7 +76,8 @@ class Checkpoint:
                    total_steps=history.total_steps, total_seconds=history.total_seconds, optimizer=state.optimizer,
                    observations=observations.to_arrays() if observations is not None else {},
                    best_observations=(history.best_observations.to_arrays()
-                                      if history.best_observations is not None else {}))
+                                      if history.best_observations is not None else {}),
+                   episode_cap=history.episode_cap)
 
     def state(self) -> ESState:
         return ESState(self.theta.astype(np.float32), self.lr, self.sigma, self.generation, dict(self.optimizer))
@@ -82,7 +85,8 @@ class Checkpoint:
     def history(self, metrics: list[dict]) -> History:
         return History(self.best_theta if self.best_theta.size else None, self.best_center,
                        RunningStat.from_arrays(self.best_observations),
-                       [float(value) for value in self.fitness_log], metrics, self.total_steps, self.total_seconds)
+                       [float(value) for value in self.fitness_log], metrics, self.total_steps, self.total_seconds,
+                       self.episode_cap)
 
     def to_bytes(self) -> bytes:
         arrays = {}
@@ -99,8 +103,9 @@ class Checkpoint:
     @classmethod
     def from_file(cls, path: Path) -> "Checkpoint":
         types = typing.get_type_hints(cls)
-        with np.load(path) as saved:
-            return cls(**{item.name: _decode(saved, item.name, types[item.name]) for item in fields(cls)})
+        with np.load(path) as saved:  # a field added later is absent from older checkpoints: its default
+            return cls(**{item.name: _decode(saved, item.name, types[item.name]) for item in fields(cls)
+                          if item.name in saved.files or item.default is MISSING})
 
 
 def _decode(saved, name: str, kind: type):

@@ -52,6 +52,7 @@ class ESSettings:
     obs_norm_prob: float = 0.01  # with obs_norm: the fraction of mirrored pairs whose observations count
     eval_every: int | None = None  # every this many generations the centre runs eval_episodes episodes
     eval_episodes: int = 10
+    variable_ep_len: bool = False  # pytorch-es: cap each generation's episodes at twice the last one's mean length
 
     def __post_init__(self) -> None:
         check_choice("shaping", self.shaping, SHAPINGS)

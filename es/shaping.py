@@ -10,6 +10,7 @@ uses centered ranks in [-0.5, 0.5], then standardised ("rank_std").
     rank_std  the original: centered ranks, then standardised (x 3.447 at N = 200, spec §2.1 step 4)
     rank      OpenAI es-starter's ``centered_rank`` (spec §2.5): the centered ranks alone
     none      the fitness itself, standardised (non-finite fitness counts as the lowest finite one)
+    nes       pytorch-es's NES utilities (Wierstra et al. 2014; spec §7.4, log-base fix included), ``es.nes``
 
 Each returns None when every member is equal: there is no direction to step in.
 """
@@ -19,6 +20,8 @@ from __future__ import annotations
 from typing import Callable
 
 import numpy as np
+
+from es.nes import nes_utilities
 
 Shaping = Callable[[np.ndarray], "np.ndarray | None"]  # None: no direction to step in
 
@@ -86,4 +89,5 @@ def standardised_fitness(fitness: np.ndarray) -> np.ndarray | None:
     return standardise(np.where(finite, fitness, fitness[finite].min()))
 
 
-SHAPINGS: dict[str, Shaping] = {"rank_std": rank_std, "rank": rank, "none": standardised_fitness}
+SHAPINGS: dict[str, Shaping] = {"rank_std": rank_std, "rank": rank, "none": standardised_fitness,
+                                 "nes": nes_utilities}

@@ -25,18 +25,20 @@ from es.noise import NoiseTable
 from es.shaping import l2_penalty
 
 TASK_DTYPE = np.dtype([("member", np.int64), ("noise_index", np.int64), ("sign", np.int64),
-                       ("env_index", np.int64), ("seed", np.int64), ("record_obs", np.int64)])
+                       ("env_index", np.int64), ("seed", np.int64), ("record_obs", np.int64),
+                       ("max_steps", np.int64)])  # max_steps: the episode's cap on policy steps, 0 for none
 Outcome = tuple[str, object]  # ("result", (return, steps, penalty, observation sums)) or ("error", message)
 Statistics = tuple[np.ndarray, np.ndarray]  # (mean, std) of the observations, as published
 
 
 def make_tasks(members: np.ndarray, noise_indices: np.ndarray, signs: np.ndarray,
-               seeds: np.ndarray, n_envs: int, record: np.ndarray | None = None) -> np.ndarray:
+               seeds: np.ndarray, n_envs: int, record: np.ndarray | None = None, max_steps: int = 0) -> np.ndarray:
     """All episodes of a generation: every member on every env and seed, member-major.
 
     ``seeds[m]`` are member m's episode seeds (shape (members, episodes)); mirrored members get the
     same seeds. ``record[m]`` (shaped as ``seeds``; default none) says which of member m's episodes
-    add their observations to the statistics, on every environment.
+    add their observations to the statistics, on every environment. ``max_steps`` caps every episode's
+    policy steps (0: no cap).
     """
     seeds = np.asarray(seeds, dtype=np.int64)
     record = np.zeros(seeds.shape, dtype=bool) if record is None else np.asarray(record, dtype=bool)
@@ -48,6 +50,7 @@ def make_tasks(members: np.ndarray, noise_indices: np.ndarray, signs: np.ndarray
     tasks["env_index"] = np.tile(np.repeat(np.arange(n_envs), seeds.shape[1]), len(members))
     tasks["seed"] = np.repeat(seeds[:, None, :], n_envs, axis=1).reshape(-1)
     tasks["record_obs"] = np.repeat(record[:, None, :], n_envs, axis=1).reshape(-1)
+    tasks["max_steps"] = max_steps
     return tasks
 
 
@@ -103,7 +106,7 @@ class Worker:
             policy = self.problem.policy
             if statistics is not None:
                 policy.observe(statistics, record=bool(task["record_obs"]))
-            episode = self.problem.evaluate(params, env_index, int(task["seed"]))
+            episode = self.problem.evaluate(params, env_index, int(task["seed"]), int(task["max_steps"]) or None)
             sums = policy.recorded() if statistics is not None else None
             return "result", (episode.total_return, episode.steps, self._penalty, sums)
         except Exception as error:  # reported to the runner, which retries once, then stops the run

@@ -14,17 +14,22 @@ from report.plots import save_run_plot
 def generation_line(row: dict) -> str:
     """The original's line (iter, reward, update_factor, lr, sum and sum of |.| of the penalised
     parameters: weights or Hebbian coefficients), then the centre's return and rank among the
-    N + 1 (``--eval_every`` generations: its evaluation mean ± std too), env steps and seconds."""
+    N + 1 (pytorch-es's "unperturbed rank": 1 of N + 1 means no member beat the centre, an
+    uninformative gradient; ``--eval_every`` generations: its evaluation mean ± std too), env steps
+    and seconds, and the episode cap of ``--variable_ep_len``."""
     name = row["parameters_name"]
     evaluation = (f" | eval: {row['center_eval_mean']:.2f} ± {row['center_eval_std']:.2f}"
                   if row["center_eval_mean"] == row["center_eval_mean"] else "")  # NaN: not evaluated
     line = (f"iter {row['generation']} | reward: {row['fitness_mean']:.3f} | "
             f"update_factor: {row['update_factor']:.6f} | lr: {row['lr']:g} | "
             f"sum_{name}: {row['parameters_sum']:.3f} | sum_abs_{name}: {row['parameters_abs_sum']:.3f} | "
-            f"center: {row['center_return']:.2f} (rank {row['center_rank']}){evaluation} | "
+            f"center: {row['center_return']:.2f} (rank {row['center_rank']} of {row['population'] + 1})"
+            f"{evaluation} | "
             f"steps: {row['env_steps']} | {row['seconds']:.1f}s")
     if row["nonfinite"]:
         line += f" | {row['nonfinite']} non-finite returns ranked last"
+    if row["episode_cap"]:
+        line += f" | episodes capped at {row['episode_cap']} steps"
     if row["skipped"]:
         line += " | step skipped: all fitness values equal"
     return line

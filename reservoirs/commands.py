@@ -26,9 +26,10 @@ import optuna
 import torch
 
 import envs
-from cli import USER_ERRORS, Parser, explained, flag_value, positive_float, positive_int
+from cli.errors import USER_ERRORS, Parser, explained
+from cli.flags import flag_value, positive_float, positive_int
 from es.files import write_json
-from es.run import UserError
+from cli.errors import UserError
 from reservoirs import experiments
 from reservoirs.esn import ReservoirSettings
 from reservoirs.experiments import ENV_TYPES, TARGET_RETURN, SearchSpace, env_ids_for, reservoirs_from_params

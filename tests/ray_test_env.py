@@ -39,12 +39,12 @@ class CrashingProblem:
         self.inner = ProblemSpec((ENV_ID,)).build()
         self.policy = self.inner.policy
 
-    def evaluate(self, params, env_index: int, seed: int):
+    def evaluate(self, params, env_index: int, seed: int, max_steps: int | None = None):
         if seed == self.spec.seed and self._should_fail():
             if self.spec.how == "exit" and os.getpid() != self.spec.driver_pid:
                 os._exit(3)
             raise RuntimeError(f"failure on purpose at episode seed {seed}")
-        return self.inner.evaluate(params, env_index, seed)
+        return self.inner.evaluate(params, env_index, seed, max_steps)
 
     def _should_fail(self) -> bool:
         if self.spec.marker is None:

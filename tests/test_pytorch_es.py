@@ -264,3 +264,4 @@ def test_pytorch_es_experiment_files_hold_its_defaults(name, environment, networ
     assert (config.env.environment, config.policy.kind, config.policy.network) == (environment, "static", network)
     es = config.es
     assert (es.popsize, es.lr, es.decay, es.sigma, es.sigma_decay, es.fitness_l2) == (40, 0.1, 1.0, 0.05, 1.0, 0.0)
+    assert es.shaping == "nes"

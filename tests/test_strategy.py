@@ -288,10 +288,10 @@ def test_tasks_are_every_member_on_every_environment_and_seed_member_major():
     seeds = [[11, 12], [11, 12], [21, 22]]
     record = [[True, False], [True, False], [False, False]]
     tasks = make_tasks(np.arange(3), np.array([5, 5, 9]), np.array([1, -1, 0]), np.array(seeds), n_envs=2,
-                       record=np.array(record))
-    expected = [(member, index, sign, env, seed, int(flag))
+                       record=np.array(record), max_steps=7)
+    expected = [(member, index, sign, env, seed, int(flag), 7)
                 for member, index, sign, member_seeds, member_record in zip(range(3), [5, 5, 9], [1, -1, 0], seeds,
                                                                             record)
                 for env in range(2) for seed, flag in zip(member_seeds, member_record)]
     assert tasks.tolist() == expected
-    assert tasks.dtype.names == ("member", "noise_index", "sign", "env_index", "seed", "record_obs")
+    assert tasks.dtype.names == ("member", "noise_index", "sign", "env_index", "seed", "record_obs", "max_steps")
