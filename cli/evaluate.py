@@ -147,13 +147,15 @@ def trained_with_obs_norm(weight_file: Path) -> bool:
 
 
 def reservoir_options(args: argparse.Namespace, argv: list[str], weight_file: Path) -> dict:
-    """The reservoir settings to evaluate with: the flags' with ``--reservoir``; without it, those of the
-    run folder's config.json, if it records a reservoir; else none."""
+    """The reservoir settings to evaluate with: the flags' with ``--reservoir`` (the seed, unless given, the
+    run folder's); without it, those of the run folder's config.json, if it records a reservoir; else none."""
     given = sorted(given_flags(argv) & {*RESERVOIR_FLAGS, "path_reservoir"})
-    if args.reservoir:
-        return dict(reservoir=True, reservoir_evolve=args.path_reservoir is not None,
-                    **{name: getattr(args, name) for name in RESERVOIR_FLAGS})
     stored = trained_policy(weight_file)
+    if args.reservoir:
+        options = {name: getattr(args, name) for name in RESERVOIR_FLAGS}
+        if options["reservoir_seed"] is None and stored.get("reservoir"):  # the seed the run drew its matrices with
+            options["reservoir_seed"] = stored.get("reservoir_seed")
+        return dict(reservoir=True, reservoir_evolve=args.path_reservoir is not None, **options)
     extra = [name for name in given if name != "path_reservoir" or not stored.get("reservoir_evolve")]
     if extra:
         raise UserError(f"--{extra[0]} has an effect only with --reservoir (or, for --path_reservoir, weights of a "

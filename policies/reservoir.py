@@ -177,6 +177,15 @@ class ReservoirFrontEnd:
         """The reservoir's hyperparameters for ``params``: decoded from its genes, or the fixed ones."""
         return hyperparameters(self.layout.view(params, ROLE)) if self.evolve else self.values
 
+    def evolved_values(self, params: np.ndarray) -> dict[str, float]:
+        """The evolved hyperparameters ``params`` encode, as metrics columns (``es.files.OPTIONAL_COLUMNS``);
+        {} when they are given, not evolved."""
+        if not self.evolve:
+            return {}
+        values = self.hyperparameters(params)
+        return {"reservoir_lr": values.leak_rate, "reservoir_sr": values.spectral_radius,
+                "reservoir_iss": values.input_scaling}
+
     def initial_params(self, rng: np.random.Generator) -> np.ndarray:
         head = self.head.initial_params(rng)
         return np.concatenate([head, genes(self.values)]) if self.evolve else head

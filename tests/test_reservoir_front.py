@@ -27,7 +27,7 @@ import train_static  # noqa: E402
 from cli.config import TrainConfig  # noqa: E402
 from envs import ProblemSpec  # noqa: E402
 from envs.evaluation import trace_episode  # noqa: E402
-from es.files import load_dat, save_dat  # noqa: E402
+from es.files import load_dat, read_metrics, save_dat  # noqa: E402
 from policies import NetworkSpec, PolicySettings, make_policy  # noqa: E402
 from policies.normalised import NormalisedInputs  # noqa: E402
 from policies.reservoir import BOUNDS, Hyperparameters, ReservoirFrontEnd, genes, hyperparameters  # noqa: E402
@@ -117,7 +117,7 @@ def test_with_obs_norm_the_reservoir_reads_the_normalised_observation():
         _, state = policy.act(params, state, observation)
         states.append(state.state.copy())
     normalised = np.clip((observations - mean) / std, -1.5, 1.5).astype(np.float32).astype(np.float64)
-    expected = plain_loop(*rebuilt(Hyperparameters(0.1, 0.1, 1.0)), 0.1, normalised)
+    expected = plain_loop(*rebuilt(Hyperparameters(0.3, 1.0, 1.0)), 0.3, normalised)
     np.testing.assert_allclose(np.array(states), expected, rtol=1e-12, atol=1e-14)
 
 
@@ -151,14 +151,14 @@ def test_genes_map_into_er_mrls_bounds_monotonically_and_start_at_the_given_valu
 
 
 def test_evolved_genes_are_the_last_parameters_outside_the_l2_penalty():
-    policy = front_end(evolve=True, reservoir_lr=0.3)
+    policy = front_end(evolve=True, reservoir_lr=0.5)
     head = front_end().head
     assert policy.num_params == head.num_params + 3 and policy.penalised == slice(0, head.num_params)
     assert list(policy.layout.describe()) == ["fc1", "fc2", "fc3", "reservoir"]
     assert policy.layout.describe()["fc1"] == [128, UNITS]
     assert policy.roles == ("weights", "reservoir")
     params = policy.initial_params(np.random.default_rng(0))
-    np.testing.assert_array_equal(params[-3:], genes(Hyperparameters(0.3, 0.1, 1.0)))
+    np.testing.assert_array_equal(params[-3:], genes(Hyperparameters(0.5, 1.0, 1.0)))
     assert policy.load(policy.export(params)).tobytes() == params.tobytes()
 
 
@@ -195,9 +195,20 @@ def test_a_run_records_its_reservoir_and_evolves_its_genes(trained):
                                                                           "reservoir_evolve": True, "reservoir_seed": 5}
     assert config["layout"]["reservoir"] == [3] and config["layout"]["fc1"] == [128, UNITS]
     evolved = load_dat(run_dir / "last_reservoir.dat")
-    assert evolved.shape == (3,) and not np.array_equal(evolved, genes(Hyperparameters(0.1, 0.1, 1.0)))
+    assert evolved.shape == (3,) and not np.array_equal(evolved, genes(Hyperparameters(0.3, 1.0, 1.0)))
     assert len(list(run_dir.glob("CartPole-v1__rew_*__pop_8__reservoir__1.dat"))) == 1
     assert len(list(run_dir.glob("CartPole-v1__rew_*__pop_8__1.dat"))) == 1
+
+
+def test_the_centres_evolved_hyperparameters_are_logged_and_in_the_metrics(trained):
+    run_dir, output = trained["static, evolved reservoir"]
+    rows = read_metrics(run_dir / "metrics.csv")
+    decoded = hyperparameters(load_dat(run_dir / "last_reservoir.dat"))
+    assert float(rows[-1]["reservoir_sr"]) == pytest.approx(decoded.spectral_radius, rel=1e-6)
+    assert [float(row["reservoir_lr"]) > 0 for row in rows] == [True, True]
+    assert f"reservoir: lr {float(rows[-1]['reservoir_lr']):.4g}, sr " in output
+    given_dir, given_output = trained["hebbian, given reservoir"]
+    assert "reservoir_lr" not in read_metrics(given_dir / "metrics.csv")[0] and "reservoir: lr" not in given_output
 
 
 def evaluated_returns(script, *argv, json_path: Path) -> list[float]:
@@ -217,6 +228,9 @@ def test_a_trained_run_evaluates_with_the_printed_command_or_its_config(case, ev
     from_config = [word for index, word in enumerate(printed) if not word.startswith("--reservoir")
                    and not printed[index - 1].startswith("--reservoir")]  # the run folder's config.json instead
     assert evaluated_returns(evaluate, *from_config, json_path=tmp_path / "config.json") == returns
+    seed_at = printed.index("--reservoir_seed")
+    no_seed = printed[:seed_at] + printed[seed_at + 2:]  # the flags, but the seed from the run folder
+    assert evaluated_returns(evaluate, *no_seed, json_path=tmp_path / "no_seed.json") == returns
     config = TrainConfig.from_dict(json.loads((run_dir / "config.json").read_text()))
     problem = ProblemSpec(("CartPole-v1",), config.policy).build()
     try:
@@ -265,7 +279,7 @@ def test_without_reservoirpy_reservoir_says_how_to_install_it(tmp_path, monkeypa
 def test_a_resumed_run_keeps_its_reservoir(trained):
     run_dir, _ = trained["static, evolved reservoir"]
     code, output = run(train_static.main, "--resume", run_dir, "--reservoir_sr", "0.5", "--generations", "3")
-    assert code == 2 and "--reservoir_sr 0.5 (the run has 0.1)" in output
+    assert code == 2 and "--reservoir_sr 0.5 (the run has 1.0)" in output
 
 
 def test_bad_evaluation_input_is_one_line(trained, tmp_path):
@@ -287,3 +301,48 @@ def test_bad_evaluation_input_is_one_line(trained, tmp_path):
         code, output = run(evaluate_static.main, *argv)
         errors = [line for line in output.splitlines() if "error:" in line]
         assert code == 2 and len(errors) == 1 and message in errors[0] and output.strip().endswith(errors[0]), output
+
+
+# --- the comparison runner and its environment ------------------------------------------------------
+
+
+def test_cartpole_without_velocities_is_cartpole_seen_through_positions():
+    import gymnasium as gym
+
+    from experiments.reservoir_front.partial import ENV_ID
+
+    full, partial = gym.make("CartPole-v1"), gym.make(ENV_ID)
+    try:
+        assert partial.observation_space.shape == (2,) and partial.spec.max_episode_steps == 500
+        observation, _ = full.reset(seed=3)
+        seen, _ = partial.reset(seed=3)
+        np.testing.assert_array_equal(seen, observation[[0, 2]])
+        for action in [0, 1, 1, 0, 1] * 4:
+            observation, reward, terminated, truncated, _ = full.step(action)
+            assert partial.step(action)[1:4] == (reward, terminated, truncated)
+            np.testing.assert_array_equal(partial.unwrapped.state[[0, 2]].astype(np.float32), observation[[0, 2]])
+    finally:
+        full.close()
+        partial.close()
+
+
+def test_the_comparison_runner_trains_evaluates_and_tabulates(tmp_path):
+    from experiments.reservoir_front import compare
+
+    code, output = run(compare.main, "--arms", "static", "static+evolved", "--seeds", "2", "--generations", "2",
+                       "--popsize", "4", "--units", "5", "--episodes", "3", "--threads", "1", "--folder", tmp_path,
+                       "--", "--optimizer", "adam")
+    assert code == 0, output[-3000:]
+    results = json.loads((tmp_path / "results.json").read_text())
+    for arm in ("static", "static+evolved"):
+        evaluation = json.loads((only_run(tmp_path / f"{arm}_seed2") / "evaluation.json").read_text())
+        assert results[arm]["2"] == evaluation and len(evaluation["environments"][0]["returns"]) == 3
+        mean = np.mean(evaluation["environments"][0]["returns"])
+        assert f"| {arm} | {mean:.1f} | **{mean:.1f}** |" in (tmp_path / "results.md").read_text()
+    config = json.loads((only_run(tmp_path / "static+evolved_seed2") / "config.json").read_text())
+    assert config["policy"]["reservoir_evolve"] and config["es"]["optimizer"] == "adam"
+    assert not json.loads((only_run(tmp_path / "static_seed2") / "config.json").read_text())["policy"]["reservoir"]
+    before = (tmp_path / "results.md").read_text()  # again: nothing retrained or re-evaluated, the same table
+    code, output = run(compare.main, "--arms", "static", "static+evolved", "--seeds", "2", "--generations", "2",
+                       "--popsize", "4", "--units", "5", "--episodes", "3", "--threads", "1", "--folder", tmp_path)
+    assert code == 0 and (tmp_path / "results.md").read_text() == before and "evaluate_" not in output
