@@ -12,7 +12,9 @@ where it does what ``FAILING_ENV_HOW`` says:
 
 If ``FAILING_ENV_ONCE`` names a file, the failure happens only while that file does not exist, and
 the first failure creates it: exactly one episode fails in the whole run, in whichever process, so
-the retry succeeds. Settings are read from the environment variables when the env is made.
+the retry succeeds. ``FAILING_ENV_AFTER`` episodes of each environment instance run normally before
+any failure (default 0), so that a test can see an episode finish first. Settings are read from the
+environment variables when the env is made.
 """
 
 from __future__ import annotations
@@ -44,6 +46,8 @@ class FailingEnv(gym.Env):
         if self.how not in HOW:
             raise ValueError(f"FAILING_ENV_HOW={self.how!r}; valid: {', '.join(HOW)}")
         self.once = once or os.environ.get("FAILING_ENV_ONCE") or None
+        self.after = int(os.environ.get("FAILING_ENV_AFTER", 0))
+        self._episodes = 0  # episodes that took a step (a reset alone, as a shape probe makes, is none)
         self._t = 0
         self._phase = 0.0
 
@@ -55,8 +59,9 @@ class FailingEnv(gym.Env):
 
     def step(self, action):
         self._t += 1
+        self._episodes += self._t == 1
         reward = 1.0
-        if self._t == self.fail_step and self._should_fail():
+        if self._t == self.fail_step and self._episodes > self.after and self._should_fail():
             reward = self._fail(int(action))
         return self._observation(), reward, False, self._t >= EPISODE_STEPS, {}
 

@@ -275,12 +275,13 @@ def test_a_closed_pipe_does_not_stop_the_run(tmp_path):
 
 
 def test_ctrl_c_during_evaluation_prints_the_episodes_done(tmp_path):
+    save_dat(tmp_path / "w.dat", np.zeros(4 * 128 + 128 * 64 + 64 * 2))
     process = subprocess.Popen([sys.executable, "evaluate_static.py", "--environment", "tests.failing_env:FailingEnv-v0",
                                 "--path_weights", str(tmp_path / "w.dat"), "--episodes", "1000"], cwd=ROOT,
                                env={**os.environ, "FAILING_ENV_STEP": "5", "FAILING_ENV_HOW": "hang",
+                                    "FAILING_ENV_AFTER": "1",  # the first episode ends, the second hangs
                                     "FAILING_ENV_ONCE": str(tmp_path / "hung"), "PYTHONUNBUFFERED": "1"},
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    save_dat(tmp_path / "w.dat", np.zeros(4 * 128 + 128 * 64 + 64 * 2))
     try:
         out = ""
         while "episode 1 " not in out and process.poll() is None:
