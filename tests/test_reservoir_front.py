@@ -338,7 +338,7 @@ def test_the_comparison_runner_trains_evaluates_and_tabulates(tmp_path):
         evaluation = json.loads((only_run(tmp_path / f"{arm}_seed2") / "evaluation.json").read_text())
         assert results[arm]["2"] == evaluation and len(evaluation["environments"][0]["returns"]) == 3
         mean = np.mean(evaluation["environments"][0]["returns"])
-        assert f"| {arm} | {mean:.1f} | **{mean:.1f}** |" in (tmp_path / "results.md").read_text()
+        assert f"| {arm} | {mean:.1f} | **{mean:.1f}** |\n" in (tmp_path / "results.md").read_text()
     config = json.loads((only_run(tmp_path / "static+evolved_seed2") / "config.json").read_text())
     assert config["policy"]["reservoir_evolve"] and config["es"]["optimizer"] == "adam"
     assert not json.loads((only_run(tmp_path / "static_seed2") / "config.json").read_text())["policy"]["reservoir"]

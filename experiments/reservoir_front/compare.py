@@ -118,15 +118,18 @@ def table(results: dict[str, dict[int, dict]], seeds: list[int]) -> str:
     and episodes) and the mean over seeds; with several environments, each one's mean over seeds too."""
     environments = next(iter(next(iter(results.values())).values()))["environments"]
     names = [environment["env_id"] for environment in environments] if len(environments) > 1 else []
-    lines = ["| arm | " + " | ".join(f"seed {seed}" for seed in seeds) + " | mean | " + "".join(f"{n} | " for n in names),
-             "|---" * (len(seeds) + 2 + len(names)) + "|"]
+
+    def row(cells: list[str]) -> str:
+        return "| " + " | ".join(cells) + " |"
+
+    lines = [row(["arm", *(f"seed {seed}" for seed in seeds), "mean", *names]), row(["---"] * (len(seeds) + 2 + len(names)))]
     for arm, runs in results.items():
         per_seed = [sum(sum(e["returns"]) for e in runs[seed]["environments"])
                     / sum(len(e["returns"]) for e in runs[seed]["environments"]) for seed in seeds]
         per_env = [sum(sum(runs[seed]["environments"][i]["returns"]) / len(runs[seed]["environments"][i]["returns"])
                        for seed in seeds) / len(seeds) for i in range(len(names))]
-        lines.append(f"| {arm} | " + " | ".join(f"{value:.1f}" for value in per_seed)
-                     + f" | **{sum(per_seed) / len(seeds):.1f}** | " + "".join(f"{value:.1f} | " for value in per_env))
+        lines.append(row([arm, *(f"{value:.1f}" for value in per_seed), f"**{sum(per_seed) / len(seeds):.1f}**",
+                          *(f"{value:.1f}" for value in per_env)]))
     return "\n".join(lines)
 
 
