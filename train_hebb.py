@@ -5,11 +5,13 @@ The weights start random every episode and change at every step by the evolved r
 
     python train_hebb.py --environment CarRacing-v0
     python train_hebb.py --environment CartPole-v1 --hebb_rule ABCD_lr --generations 20 --seed 1
+    python train_hebb.py --environment CartPole-v1 --reservoir --reservoir_units 50 --generations 20 --seed 1
 """
 
 import sys
 
 from cli import DISTRIBUTIONS, INIT_CHOICES, RULES, train_main, training_parser
+from cli.flags import add_reservoir_flags
 
 
 def build_parser():
@@ -22,6 +24,7 @@ def build_parser():
     parser.add_argument("--distribution", default="normal", choices=list(DISTRIBUTIONS), metavar="DIST",
                         help="generation-0 coefficients (and CNN / co-evolved weights): normal N(0,1) "
                              "or uniform U(-1,1)")
+    add_reservoir_flags(parser)
     return parser
 
 

@@ -3,18 +3,20 @@
 
     python train_static.py --environment CarRacing-v0
     python train_static.py --environment CartPole-v1 --generations 20 --popsize 32 --seed 1
+    python train_static.py --environment CartPole-v1 --reservoir --reservoir_evolve --generations 20 --seed 1
     python train_static.py --environment PongDeterministic-v4 --network lstm --popsize 40 --lr 0.1 --sigma 0.05
 """
 
 import sys
 
 from cli import train_main, training_parser
-from cli.flags import add_network_flag
+from cli.flags import add_network_flag, add_reservoir_flags
 
 
 def build_parser():
     parser = training_parser("train_static.py", __doc__.splitlines()[0], folder="weights")
     add_network_flag(parser)
+    add_reservoir_flags(parser)
     return parser
 
 

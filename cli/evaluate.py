@@ -4,7 +4,10 @@ One evaluation function (``envs.evaluation.evaluate``) runs the episodes through
 rollout; the outputs the user asks for (``--json``, ``--plot``, ``--video``) are checked before any
 episode runs. Weights trained with ``--obs_norm`` are evaluated with the observation statistics
 saved beside them (``<name>.obs_norm.npz``, ``es.observations``), found automatically; weights in
-a run folder whose config.json says ``obs_norm`` but without that file are refused.
+a run folder whose config.json says ``obs_norm`` but without that file are refused. Weights trained with
+``--reservoir`` are evaluated with the reservoir the flags describe, or, without ``--reservoir``, the one
+the run folder's config.json records (``policies.reservoir``); evolved reservoir hyperparameters come
+from ``--path_reservoir``.
 """
 
 from __future__ import annotations
@@ -16,8 +19,8 @@ import sys
 from pathlib import Path
 
 from cli.errors import USER_ERRORS, Parser, UserError, explained, say
-from cli.flags import SEED_RANGE, flag_value, positive_int, seed_value
-from cli.train import resolve_environments
+from cli.flags import RESERVOIR_FLAGS, SEED_RANGE, add_reservoir_flags, flag_value, positive_int, seed_value
+from cli.train import given_flags, resolve_environments
 from envs import ProblemSpec
 from envs.headless import RenderingUnavailable, check_can_render, choose_mujoco_gl
 from es.observations import SavedStatistics, load_statistics, statistics_path
@@ -43,6 +46,7 @@ def evaluation_parser(prog: str, description: str) -> Parser:
     add("--plot", default=None, metavar="PATH",
         help="PNG of one episode (first environment, first seed): reward per step, or for ants the "
              "distance walked, and for Hebbian networks the norm of each layer's weights over time")
+    add_reservoir_flags(parser, evaluation=True)
     return parser
 
 
@@ -128,12 +132,47 @@ def saved_statistics(weight_file: Path) -> SavedStatistics | None:
     return statistics
 
 
+def trained_policy(weight_file: Path) -> dict:
+    """The policy settings of the run folder ``weight_file`` lies in (its config.json); {} elsewhere."""
+    try:
+        policy = json.loads((weight_file.parent / "config.json").read_text())["policy"]
+    except (OSError, ValueError, KeyError, TypeError):  # not in a run folder, or one from before sections
+        return {}
+    return policy if isinstance(policy, dict) else {}
+
+
 def trained_with_obs_norm(weight_file: Path) -> bool:
     """Whether the run folder ``weight_file`` lies in (its config.json) normalised observations."""
-    try:
-        return bool(json.loads((weight_file.parent / "config.json").read_text())["policy"]["obs_norm"])
-    except (OSError, ValueError, KeyError, TypeError):  # not in a run folder, or one from before --obs_norm
-        return False
+    return bool(trained_policy(weight_file).get("obs_norm", False))
+
+
+def reservoir_options(args: argparse.Namespace, argv: list[str], weight_file: Path) -> dict:
+    """The reservoir settings to evaluate with: the flags' with ``--reservoir`` (the seed, unless given, the
+    run folder's); without it, those of the run folder's config.json, if it records a reservoir; else none."""
+    given = sorted(given_flags(argv) & {*RESERVOIR_FLAGS, "path_reservoir"})
+    stored = trained_policy(weight_file)
+    if args.reservoir:
+        options = {name: getattr(args, name) for name in RESERVOIR_FLAGS}
+        if options["reservoir_seed"] is None and stored.get("reservoir"):  # the seed the run drew its matrices with
+            options["reservoir_seed"] = stored.get("reservoir_seed")
+        return dict(reservoir=True, reservoir_evolve=args.path_reservoir is not None, **options)
+    extra = [name for name in given if name != "path_reservoir" or not stored.get("reservoir_evolve")]
+    if extra:
+        raise UserError(f"--{extra[0]} has an effect only with --reservoir (or, for --path_reservoir, weights of a "
+                        f"--reservoir_evolve run); add --reservoir or leave --{extra[0]} out")
+    if not stored.get("reservoir"):
+        return {}
+    say(f"reservoir: as {weight_file.parent / 'config.json'} records it")
+    return {name: stored[name] for name in ("reservoir", "reservoir_evolve", *RESERVOIR_FLAGS) if name in stored}
+
+
+def describe_reservoir(problem, params) -> None:
+    """One line: the reservoir the weights are evaluated with (evolved hyperparameters decoded)."""
+    settings = problem.spec.policy
+    if settings.reservoir:
+        evolved = " (evolved)" if settings.reservoir_evolve else ""
+        say(f"reservoir: {settings.reservoir_units} units, seed {settings.reservoir_seed}, "
+            f"{problem.policy.hyperparameters(params).describe()}{evolved}")
 
 
 def normalise_observations(problem, weight_file: Path, statistics: SavedStatistics | None) -> None:
@@ -151,6 +190,7 @@ def evaluate_main(kind: str, parser: Parser, argv: list[str] | None, load_arrays
     """Shared body of the evaluate scripts; ``load_arrays(args)`` reads the weight files, whose paths
     ``input_paths(args)`` lists (the first is the one observation statistics are looked for beside)."""
     from envs.evaluation import EpisodeError, evaluate, format_table
+    from es.files import load_dat
     from report.video import record_first_episode
 
     argv = sys.argv[1:] if argv is None else argv
@@ -164,24 +204,29 @@ def evaluate_main(kind: str, parser: Parser, argv: list[str] | None, load_arrays
 
     try:
         env_ids = resolve_environments(args.environment)
-        check_outputs(args, input_paths(args))
+        check_outputs(args, input_paths(args) + ([args.path_reservoir] if args.path_reservoir else []))
         if args.seed + args.episodes - 1 > SEED_RANGE[1]:
             raise UserError(f"--seed {args.seed} with --episodes {args.episodes} runs past the largest episode seed "
                             f"{SEED_RANGE[1]}")
         if args.render and args.video:
             raise UserError("--video records frames off screen; it cannot be combined with --render")
         arrays = load_arrays(args)
+        if args.path_reservoir is not None:
+            arrays["reservoir"] = load_dat(args.path_reservoir)
         weight_file = Path(input_paths(args)[0])
         with explained("cannot load the observation statistics"):
             statistics = saved_statistics(weight_file)
         options = {name: getattr(args, name) for name in ("hebb_rule", "init_weights", "network") if hasattr(args, name)}
-        policy = PolicySettings(kind, **options, obs_clip=statistics.clip if statistics else None,
-                                obs_norm=statistics is not None or trained_with_obs_norm(weight_file))
+        with explained("bad reservoir settings"):
+            policy = PolicySettings(kind, **options, obs_clip=statistics.clip if statistics else None,
+                                    obs_norm=statistics is not None or trained_with_obs_norm(weight_file),
+                                    **reservoir_options(args, argv, weight_file))
         render_mode = "human" if args.render else ("rgb_array" if args.video else None)
         problem = build_problem(ProblemSpec(env_ids, policy), render_mode)
         normalise_observations(problem, weight_file, statistics)
         with explained("cannot load the weights"):
             params = problem.policy.load(arrays)
+        describe_reservoir(problem, params)
         if args.video:
             recorder = record_first_episode(problem, args.video)
         reports = evaluate(problem, params, args.episodes, args.seed, on_episode=finished_episode)

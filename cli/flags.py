@@ -78,3 +78,42 @@ def add_network_flag(parser: argparse.ArgumentParser) -> None:
                         help="default: the original's MLP (state vectors) or CNN (images); small: pytorch-es's "
                              "64-64 selu MLP (state vectors); lstm: pytorch-es's conv-LSTM on its 42x42 "
                              "normalised frames (images)")
+
+
+RESERVOIR_FLAGS = ("reservoir_units", "reservoir_lr", "reservoir_sr", "reservoir_iss", "reservoir_seed")
+
+
+def add_reservoir_flags(parser: argparse.ArgumentParser, evaluation: bool = False) -> None:
+    """``--reservoir`` and its settings (``policies.reservoir``); values are checked by ``PolicySettings``.
+
+    Training has ``--reservoir_evolve``; evaluation reads evolved hyperparameters from ``--path_reservoir``,
+    and takes the whole reservoir from the run folder's config.json when ``--reservoir`` is not given."""
+    from policies import PolicySettings
+
+    group = parser.add_argument_group("reservoir front end (ER-MRL's echo state network before the network)")
+    add = group.add_argument
+    add("--reservoir", action="store_true",
+        help="the network reads the state of a random reservoir (ER-MRL's leaky echo state network, reset every "
+             "episode) that reads the observation; not for pixels; needs reservoirpy "
+             "(pip install -r requirements-reservoirs.txt)"
+             + ("; default: as the run folder's config.json says" if evaluation else ""))
+    add("--reservoir_units", type=int, default=PolicySettings.reservoir_units, metavar="N",
+        help="its neurons (ER-MRL's --units)")
+    add("--reservoir_lr", type=float, default=PolicySettings.reservoir_lr, metavar="LR",
+        help="its leak rate, in (0, 1]" + ("" if evaluation else "; with --reservoir_evolve where evolution starts"))
+    add("--reservoir_sr", type=float, default=PolicySettings.reservoir_sr, metavar="SR",
+        help="the spectral radius of its recurrent weights")
+    add("--reservoir_iss", type=float, default=PolicySettings.reservoir_iss, metavar="ISS",
+        help="the scaling of its input weights")
+    if evaluation:
+        add("--reservoir_seed", type=seed_value, default=None,
+            help="the seed its matrices were drawn with: the training run's (its config.json's reservoir_seed)")
+        add("--path_reservoir", default=None, metavar="FILE",
+            help="the evolved reservoir hyperparameters of a --reservoir_evolve run (best_reservoir.dat, "
+                 "last_reservoir.dat)")
+    else:
+        add("--reservoir_seed", type=seed_value, default=None,
+            help="the seed of its random matrices (default: the run's --seed)")
+        add("--reservoir_evolve", action="store_true",
+            help="evolve its leak rate, spectral radius and input scaling with the network: three more parameters, "
+                 "log-scale within ER-MRL's bounds lr [0.01, 1], sr [1e-4, 100], iss [0.1, 10]")

@@ -16,10 +16,10 @@ from cli.config import TrainConfig
 
 ROOT = Path(__file__).resolve().parent.parent
 TRAIN_SCRIPTS = {"static": "train_static.py", "hebbian": "train_hebb.py"}
-# role of a policy's exported array -> (evaluate script, its flag)
-EVALUATE_FLAGS = {"weights": ("evaluate_static.py", "--path_weights"), "coeffs": ("evaluate_hebb.py", "--path_hebb"),
-                  "CNN_parameters": ("evaluate_hebb.py", "--path_coev"),
-                  "coevolved_initial_weights": ("evaluate_hebb.py", "--path_coev")}
+EVALUATE_SCRIPTS = {"static": "evaluate_static.py", "hebbian": "evaluate_hebb.py"}
+# role of a policy's exported array -> the evaluate scripts' flag for its file
+EVALUATE_FLAGS = {"weights": "--path_weights", "coeffs": "--path_hebb", "CNN_parameters": "--path_coev",
+                  "coevolved_initial_weights": "--path_coev", "reservoir": "--path_reservoir"}
 
 
 def script_path(name: str) -> str:
@@ -47,6 +47,20 @@ def evaluate_hint(config: TrainConfig, paths: dict[str, Path]) -> str:
         words += ["--hebb_rule", config.policy.hebb_rule, "--init_weights", config.policy.init_weights]
     if config.policy.network != "default":
         words += ["--network", config.policy.network]
+    words += reservoir_words(config)
     for role, path in paths.items():
-        words += [EVALUATE_FLAGS[role][1], path]
-    return command(EVALUATE_FLAGS[next(iter(paths))][0], *words, "--episodes", 10)
+        words += [EVALUATE_FLAGS[role], path]
+    return command(EVALUATE_SCRIPTS[config.policy.kind], *words, "--episodes", 10)
+
+
+def reservoir_words(config: TrainConfig) -> list[object]:
+    """The reservoir flags of the evaluate scripts, for a run with ``--reservoir`` (evolved hyperparameters
+    come from their file instead)."""
+    policy = config.policy
+    if not policy.reservoir:
+        return []
+    words: list[object] = ["--reservoir", "--reservoir_units", policy.reservoir_units]
+    if not policy.reservoir_evolve:
+        words += ["--reservoir_lr", policy.reservoir_lr, "--reservoir_sr", policy.reservoir_sr,
+                  "--reservoir_iss", policy.reservoir_iss]
+    return words + ["--reservoir_seed", policy.reservoir_seed]

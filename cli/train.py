@@ -17,7 +17,7 @@ from pathlib import Path
 import envs
 from cli.config import SECTIONS, TrainConfig, field_names, read_toml
 from cli.errors import USER_ERRORS, Parser, UserError, explained, say
-from cli.flags import fraction, non_empty, positive_float, positive_int, seed_value, threads_value
+from cli.flags import RESERVOIR_FLAGS, fraction, non_empty, positive_float, positive_int, seed_value, threads_value
 from cli.hints import TRAIN_SCRIPTS, evaluate_hint, resume_hint
 from envs import EnvSettings, ProblemSpec
 from es.backends import BACKENDS
@@ -115,6 +115,7 @@ NEEDS = {
     "obs_clip": ("--obs_norm", lambda values: values["obs_norm"]),
     "obs_norm_prob": ("--obs_norm", lambda values: values["obs_norm"]),
     "eval_episodes": ("--eval_every", lambda values: values["eval_every"] is not None),
+    **{name: ("--reservoir", lambda values: values["reservoir"]) for name in (*RESERVOIR_FLAGS, "reservoir_evolve")},
 }
 
 
@@ -178,7 +179,7 @@ def config_from_args(kind: str, args: argparse.Namespace, argv: list[str]) -> Tr
     seed = values["seed"] if values["seed"] is not None else secrets.randbelow(2**31)
     try:
         es = ESSettings(**{**pick(ESSettings, values), "popsize": population_size(values["popsize"])})
-        policy = PolicySettings(**{**pick(PolicySettings, values), "kind": kind})
+        policy = PolicySettings(**{**pick(PolicySettings, values), "kind": kind}).seeded(seed)
         run = RunSettings(**{**pick(RunSettings, values), "seed": seed})
         env_values = {**pick(EnvSettings, values), "env_ids": (), "recipe_modules": ()}
         EnvSettings(**env_values)  # checked before any environment is resolved

@@ -199,7 +199,7 @@ def trace_episode(problem: Problem, params: np.ndarray, seed: int, env_index: in
     and the Frobenius norm of each dense layer's current weights (plastic networks only)."""
     trace = Trace(problem.spec.env_ids[env_index], seed)
     tracker = track_torso(problem.envs[env_index])
-    net = problem.net
+    net = getattr(problem.policy, "net", problem.net)  # behind a front end (--reservoir), the network's own
 
     def observe(t: int, reward: float, state, info: dict) -> None:
         trace.rewards.append(reward)

@@ -16,7 +16,8 @@ def generation_line(row: dict) -> str:
     parameters: weights or Hebbian coefficients), then the centre's return and rank among the
     N + 1 (pytorch-es's "unperturbed rank": 1 of N + 1 means no member beat the centre, an
     uninformative gradient; ``--eval_every`` generations: its evaluation mean ± std too), env steps
-    and seconds, and the episode cap of ``--variable_ep_len``."""
+    and seconds, the episode cap of ``--variable_ep_len``, and the centre's evolved reservoir
+    (``--reservoir_evolve``)."""
     name = row["parameters_name"]
     evaluation = (f" | eval: {row['center_eval_mean']:.2f} ± {row['center_eval_std']:.2f}"
                   if row["center_eval_mean"] == row["center_eval_mean"] else "")  # NaN: not evaluated
@@ -30,6 +31,9 @@ def generation_line(row: dict) -> str:
         line += f" | {row['nonfinite']} non-finite returns ranked last"
     if row["episode_cap"]:
         line += f" | episodes capped at {row['episode_cap']} steps"
+    if "reservoir_lr" in row:
+        line += (f" | reservoir: lr {row['reservoir_lr']:.4g}, sr {row['reservoir_sr']:.4g}, "
+                 f"iss {row['reservoir_iss']:.4g}")
     if row["skipped"]:
         line += " | step skipped: all fitness values equal"
     return line

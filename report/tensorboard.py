@@ -14,7 +14,7 @@ import importlib.util
 import math
 from pathlib import Path
 
-from es.files import METRICS_COLUMNS
+from es.files import METRICS_COLUMNS, OPTIONAL_COLUMNS
 
 FOLDER = "tensorboard"
 INSTALL_HINT = "pip install -r requirements-tensorboard.txt (or pip install -e .[tensorboard])"
@@ -27,7 +27,7 @@ def available() -> bool:
 def scalars(row: dict) -> dict[str, float]:
     """The row's numeric, finite columns, but the step itself."""
     found = {}
-    for name in METRICS_COLUMNS[1:]:
+    for name in METRICS_COLUMNS[1:] + OPTIONAL_COLUMNS:
         try:
             value = float(row.get(name))
         except (TypeError, ValueError):  # absent, empty or not a number

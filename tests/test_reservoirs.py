@@ -15,7 +15,7 @@ pytest.importorskip("reservoirpy", reason="the ER-MRL extra is optional: pip ins
 pytest.importorskip("optuna", reason="the ER-MRL extra is optional: pip install -r requirements-reservoirs.txt")
 
 from reservoirs import experiments  # noqa: E402
-from reservoirs.esn import EchoStateNetwork, ReservoirSettings  # noqa: E402
+from reservoirs.esn import CONNECTIVITY, EchoStateNetwork, ReservoirMatrices, ReservoirSettings  # noqa: E402
 from reservoirs.study import make_sampler, process_seed, study_name  # noqa: E402
 from reservoirs.wrappers import (  # noqa: E402
     DeletedVelocityWrapper,
@@ -83,6 +83,28 @@ def test_matrices_have_the_0_3_structure():
     assert np.max(np.abs(np.linalg.eigvals(weights))) == pytest.approx(1.7, rel=1e-9)
     assert set(np.unique(input_weights)) == {-2.5, 0.0, 2.5}
     assert set(np.unique(bias)) == {-1.0, 0.0, 1.0}
+
+
+@pytest.mark.parametrize("units, seed", [(3, 7), (5, 7), (50, 2)])  # (5, 7): a nilpotent W, whose radius is floored
+def test_drawn_matrices_rescale_to_mat_gen_s_bit_for_bit(units, seed):
+    """Drawn once and rescaled, the matrices are those mat_gen makes for each (sr, iss) (policies.reservoir)."""
+    from reservoirpy import mat_gen
+
+    drawn = ReservoirMatrices.generate(units, 6, seed)
+    for spectral_radius, input_scaling in ((0.1, 1.0), (1.7, 2.5), (50.0, 0.13)):
+        weights, input_weights, _ = drawn.scaled(spectral_radius, input_scaling)
+        expected = mat_gen.normal(units, units, connectivity=CONNECTIVITY, sr=spectral_radius, seed=seed)
+        np.testing.assert_array_equal(weights.toarray(), expected.toarray())
+        expected = mat_gen.bernoulli(units, 6, connectivity=CONNECTIVITY, input_scaling=input_scaling, seed=seed)
+        np.testing.assert_array_equal(input_weights.toarray(), expected.toarray())
+
+
+@pytest.mark.parametrize("units", [1, 2])
+def test_one_or_two_units_build(units):
+    """ARPACK needs 3 units; below, the radius comes from the dense eigenvalues (reservoirpy raised a TypeError)."""
+    network = EchoStateNetwork(4, ReservoirSettings(units, 0.5, 0.9), seed=1)
+    expected = plain_loop(*network.matrices(), 0.5, np.ones((3, 4)))
+    np.testing.assert_allclose(np.array([network.step(np.ones(4)) for _ in range(3)]), expected, rtol=1e-12)
 
 
 def test_same_seed_same_reservoir_other_seed_other():

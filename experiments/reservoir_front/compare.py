@@ -1,0 +1,163 @@
+#!/usr/bin/env python
+"""Three evolved priors side by side: evolved weights, evolved Hebbian rules, and either one reading a reservoir.
+
+    python experiments/reservoir_front/compare.py                       # CartPole without velocities, 3 seeds
+    python experiments/reservoir_front/compare.py --seeds 1 --generations 5 --popsize 8 --episodes 5  # a quick try
+    python experiments/reservoir_front/compare.py --environment Ant-v5,AntAsymRight-v5 \\
+        --evaluate_on Ant-v5,AntAsymRight-v5,AntAsymLeft-v5 --generations 300 --popsize 200   # the damaged ants
+
+Every arm runs the same ES with the same flags (those after ``--`` go to every training run), on the same
+seeds, and is evaluated on the same episodes (seeds 0 to --episodes - 1, on every --evaluate_on
+environment), from the run's last*.dat files. The arms (ARMS) differ only in what is evolved:
+
+    static              train_static.py: the weights of the MLP (Salimans et al. 2017)
+    hebbian             train_hebb.py: one ABCD_lr rule per synapse, random weights every episode (Najarro & Risi 2020)
+    static+reservoir    the MLP reads a reservoir with ER-MRL's best CartPole-without-velocities hyperparameters
+    static+evolved      the MLP reads a reservoir whose lr, sr and iss evolve with it (--reservoir_evolve)
+    hebbian+reservoir   as static+reservoir, with Hebbian rules
+    hebbian+evolved     as static+evolved, with Hebbian rules
+
+Runs go to <folder>/<arm>_seed<seed>/ (default folder: runs/reservoir_front); running the same command
+again resumes unfinished runs and re-evaluates nothing already evaluated. The table (mean return over the
+evaluation episodes, per seed, and the mean over seeds) is printed and written to <folder>/results.md, with
+the numbers in <folder>/results.json. --dry-run prints the commands.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent.parent
+DEFAULT_ENV = "experiments.reservoir_front.partial:CartPoleNoVelocity-v1"
+# the reservoir ER-MRL evolved for PPO on CartPole without velocities (README, "Evolved reservoirs (ER-MRL)":
+# trial 7, sr 1.00, lr 0.34), given as it is to the ES arms
+GIVEN = ("--reservoir", "--reservoir_lr", "0.34", "--reservoir_sr", "1.0")
+EVOLVED = ("--reservoir", "--reservoir_evolve")
+ARMS = {
+    "static": ("static", ()),
+    "hebbian": ("hebbian", ()),
+    "static+reservoir": ("static", GIVEN),
+    "static+evolved": ("static", EVOLVED),
+    "hebbian+reservoir": ("hebbian", GIVEN),
+    "hebbian+evolved": ("hebbian", EVOLVED),
+}
+TRAIN = {"static": "train_static.py", "hebbian": "train_hebb.py"}
+EVALUATE = {"static": "evaluate_static.py", "hebbian": "evaluate_hebb.py"}
+# the files of a run's final parameters, and the evaluate scripts' flags for them
+LAST_FILES = (("last.dat", "--path_weights"), ("last_coeffs.dat", "--path_hebb"),
+              ("last_CNN_parameters.dat", "--path_coev"), ("last_coevolved_initial_weights.dat", "--path_coev"),
+              ("last_reservoir.dat", "--path_reservoir"))
+
+
+def parse(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
+    extra = argv[argv.index("--") + 1:] if "--" in argv else []
+    argv = argv[:argv.index("--")] if "--" in argv else argv
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser.add_argument("--environment", default=DEFAULT_ENV, help="training environment(s), as the scripts take them")
+    parser.add_argument("--evaluate_on", default=None, help="evaluation environment(s); default: --environment")
+    parser.add_argument("--arms", nargs="+", choices=list(ARMS), default=list(ARMS), metavar="ARM",
+                        help=f"which arms, of {', '.join(ARMS)}")
+    parser.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3], metavar="SEED")
+    parser.add_argument("--generations", type=int, default=100)
+    parser.add_argument("--popsize", type=int, default=64)
+    parser.add_argument("--units", type=int, default=20, help="the reservoir's units (--reservoir_units)")
+    parser.add_argument("--episodes", type=int, default=100, help="evaluation episodes per environment")
+    parser.add_argument("--threads", type=int, default=-1)
+    parser.add_argument("--folder", type=Path, default=ROOT / "runs" / "reservoir_front")
+    parser.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
+    return parser.parse_args(argv), extra
+
+
+def the_run(folder: Path) -> Path | None:
+    runs = sorted(path.parent for path in folder.glob("*/checkpoint.npz"))  # names start with the time
+    return runs[-1] if runs else None
+
+
+def train_command(args: argparse.Namespace, extra: list[str], arm: str, seed: int, folder: Path) -> list[str]:
+    kind, flags = ARMS[arm]
+    command = [sys.executable, str(ROOT / TRAIN[kind])]
+    previous = the_run(folder)
+    if previous is not None:  # resume: --generations is the total
+        return command + ["--resume", str(previous), "--generations", str(args.generations)]
+    reservoir = ["--reservoir_units", str(args.units)] if flags else []
+    return command + ["--environment", args.environment, "--seed", str(seed), "--generations", str(args.generations),
+                      "--popsize", str(args.popsize), "--threads", str(args.threads), "--folder", str(folder),
+                      *flags, *reservoir, *extra]
+
+
+def evaluate_command(args: argparse.Namespace, arm: str, run_dir: Path) -> list[str]:
+    """The run's last*.dat files; the evaluate scripts take the rule and the reservoir from its config.json."""
+    kind = ARMS[arm][0]
+    command = [sys.executable, str(ROOT / EVALUATE[kind]), "--environment", args.evaluate_on or args.environment,
+               "--episodes", str(args.episodes), "--seed", "0", "--json", str(run_dir / "evaluation.json")]
+    if kind == "hebbian":
+        policy = json.loads((run_dir / "config.json").read_text())["policy"]
+        command += ["--hebb_rule", policy["hebb_rule"], "--init_weights", policy["init_weights"]]
+    return command + [word for name, flag in LAST_FILES if (run_dir / name).exists()
+                      for word in (flag, str(run_dir / name))]
+
+
+def run(command: list[str], dry_run: bool) -> None:
+    print("$ " + shlex.join(command), flush=True)
+    if not dry_run:
+        code = subprocess.run(command, cwd=ROOT).returncode
+        if code:
+            sys.exit(code)
+
+
+def table(results: dict[str, dict[int, dict]], seeds: list[int]) -> str:
+    """Markdown: one row per arm, the mean return of each seed's run (over all evaluation environments
+    and episodes) and the mean over seeds; with several environments, each one's mean over seeds too."""
+    environments = next(iter(next(iter(results.values())).values()))["environments"]
+    names = [environment["env_id"] for environment in environments] if len(environments) > 1 else []
+
+    def row(cells: list[str]) -> str:
+        return "| " + " | ".join(cells) + " |"
+
+    lines = [row(["arm", *(f"seed {seed}" for seed in seeds), "mean", *names]), row(["---"] * (len(seeds) + 2 + len(names)))]
+    for arm, runs in results.items():
+        per_seed = [sum(sum(e["returns"]) for e in runs[seed]["environments"])
+                    / sum(len(e["returns"]) for e in runs[seed]["environments"]) for seed in seeds]
+        per_env = [sum(sum(runs[seed]["environments"][i]["returns"]) / len(runs[seed]["environments"][i]["returns"])
+                       for seed in seeds) / len(seeds) for i in range(len(names))]
+        lines.append(row([arm, *(f"{value:.1f}" for value in per_seed), f"**{sum(per_seed) / len(seeds):.1f}**",
+                          *(f"{value:.1f}" for value in per_env)]))
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args, extra = parse(sys.argv[1:] if argv is None else argv)
+    results: dict[str, dict[int, dict]] = {}
+    for arm in args.arms:
+        for seed in args.seeds:
+            folder = args.folder / f"{arm}_seed{seed}"
+            started = time.perf_counter()
+            run(train_command(args, extra, arm, seed, folder), args.dry_run)
+            run_dir = the_run(folder) or folder / "<run folder>"
+            evaluation = run_dir / "evaluation.json"
+            if args.dry_run or not evaluation.exists():
+                run(evaluate_command(args, arm, run_dir) if not args.dry_run else
+                    [EVALUATE[ARMS[arm][0]], "…", "--json", str(evaluation)], args.dry_run)
+            if not args.dry_run:
+                results.setdefault(arm, {})[seed] = json.loads(evaluation.read_text())
+                print(f"# {arm}, seed {seed}: {time.perf_counter() - started:.0f} s", flush=True)
+    if args.dry_run:
+        return 0
+    text = table(results, args.seeds)
+    print(text)
+    args.folder.mkdir(parents=True, exist_ok=True)
+    (args.folder / "results.md").write_text(text + "\n")
+    (args.folder / "results.json").write_text(json.dumps(results, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

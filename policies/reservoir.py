@@ -1,0 +1,232 @@
+"""The reservoir front end (``--reservoir``): an evolved head reads an echo state network's state.
+
+One step beyond ER-MRL (Léger et al. 2024, upstream spec §8): there a PPO agent learns on a
+reservoir's state; here the head this tool evolves, static (Salimans et al. 2017) or Hebbian
+(Najarro & Risi 2020), reads it instead of the observation, so the three kinds of evolved prior
+(weights, plasticity rules, reservoirs) run on the same environments and the same protocol.
+
+- **The reservoir** is ER-MRL's: the leaky integrator
+  x[t+1] = (1 - lr) x[t] + lr tanh(W_in u[t+1] + W x[t] + b), W, W_in and b drawn as reservoirpy 0.3
+  drew them (``reservoirs.esn.ReservoirMatrices``), so a given (units, lr, sr, iss, seed) is the very
+  reservoir ER-MRL's scripts build. The state starts at zero at every episode (``reset``); the draws
+  are fixed for the run, from ``PolicySettings.reservoir_seed`` (the run's seed unless given), so every
+  worker, and a resumed run, regenerates the same matrices from one integer: nothing but the seed
+  travels. reservoirpy is needed to draw them (ER-MRL's matrices come from its ``mat_gen``); the
+  steps run here, one compiled call on the sparse matrices, without reservoirpy's node API.
+- **Its input is the observation only**, not ER-MRL's (observation, previous action, reward). The
+  three priors are compared on the same information: static and Hebbian networks see observations,
+  never rewards (``act`` does not receive them), so a reward input would add information, and change
+  two things at once. And the previous action adds none: an ES policy is deterministic, so its actions
+  are a function of the observations it has seen, whereas PPO's are sampled, which is why ER-MRL feeds
+  them. The reservoir brings memory (velocities from positions, a trace of the past) and a random
+  nonlinear expansion. With ``--obs_norm`` it reads the normalised observation.
+- **Evolved hyperparameters** (``--reservoir_evolve``): θ ends with three genes z = (z_lr, z_sr, z_iss),
+  one per hyperparameter, mapped log-uniformly into ER-MRL's search bounds (its ``--min_*`` /
+  ``--max_*`` defaults, ``BOUNDS``) through a logistic function:
+      value = low * (high / low) ** sigmoid(z)
+  smooth, always inside the bounds, never flat as a clip would be; z = 0 is the geometric middle of
+  the range (where ER-MRL's CMA-ES starts), and θ starts at the values of ``--reservoir_lr/_sr/_iss``.
+  With σ = 0.1, a gene's perturbation near z = 0 moves sr by a factor of about 1.4, lr by 1.12, iss
+  by 1.12. The genes are not in the fitness's L2 penalty (``penalised`` is the head's). Each episode
+  rescales the drawn matrices by the member's sr and iss (``ReservoirMatrices``: bit for bit the
+  matrices a fresh build would make), a multiplication of the non-zero entries: about a microsecond
+  for 100 units, where a rebuild costs an eigenvalue solve (10 ms).
+- **Files**: the head's, plus with evolved hyperparameters the role ``reservoir``: the three genes as
+  θ holds them (float32, so that evaluation runs exactly the trained reservoir; ``hyperparameters``
+  decodes them), in ``best_reservoir.dat`` / ``last_reservoir.dat`` and the per-generation file the
+  head names for that role.
+
+Pixel observations are refused: ER-MRL's reservoirs read vectors, and a reservoir behind the CNN
+would change what the CNN's weights are evolved for.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from policies.base import Policy
+from policies.network import Layout, NetworkSpec
+from policies.static import check_length
+
+ROLE = "reservoir"  # the file role (and layout part) of the evolved hyperparameters
+# ER-MRL's default search bounds (--min_lr 1e-2 --max_lr 1, --min_sr 1e-4 --max_sr 1e2, --min_iss 1e-1
+# --max_iss 10), in the order of the genes
+BOUNDS: dict[str, tuple[float, float]] = {"lr": (1e-2, 1.0), "sr": (1e-4, 1e2), "iss": (1e-1, 10.0)}
+MAX_UNITS = 10_000  # each worker holds its own matrices, and their eigenvalue solve grows with units^2
+
+
+@dataclass(frozen=True)
+class Hyperparameters:
+    leak_rate: float
+    spectral_radius: float
+    input_scaling: float
+
+    def describe(self) -> str:
+        return f"leak rate {self.leak_rate:.4g}, spectral radius {self.spectral_radius:.4g}, " \
+               f"input scaling {self.input_scaling:.4g}"
+
+
+def _sigmoid(gene: float) -> float:
+    if gene >= 0:
+        return 1.0 / (1.0 + math.exp(-gene))
+    tail = math.exp(gene)  # no overflow for a very negative gene
+    return tail / (1.0 + tail)
+
+
+def hyperparameters(genes: np.ndarray) -> Hyperparameters:
+    """The hyperparameters three genes encode: low * (high / low) ** sigmoid(z), each within BOUNDS."""
+    values = []
+    for gene, (low, high) in zip(np.asarray(genes, dtype=np.float64), BOUNDS.values()):
+        value = math.exp(math.log(low) + _sigmoid(float(gene)) * (math.log(high) - math.log(low)))
+        values.append(min(max(value, low), high))  # rounding never leaves the bounds
+    return Hyperparameters(*values)
+
+
+def genes(values: Hyperparameters) -> np.ndarray:
+    """The genes that encode ``values`` (each strictly inside its bounds): generation 0's."""
+    encoded = []
+    for value, (low, high) in zip((values.leak_rate, values.spectral_radius, values.input_scaling),
+                                  BOUNDS.values()):
+        fraction = (math.log(value) - math.log(low)) / (math.log(high) - math.log(low))
+        encoded.append(math.log(fraction / (1.0 - fraction)))
+    return np.array(encoded, dtype=np.float32)
+
+
+def check_settings(units: int, values: Hyperparameters, evolve: bool, seed: int | None) -> None:
+    """Refuse, naming the flag, what ``--reservoir`` cannot run with."""
+    if not 1 <= units <= MAX_UNITS:
+        raise ValueError(f"--reservoir_units must be a whole number from 1 to {MAX_UNITS}, got {units}")
+    if not 0 < values.leak_rate <= 1:
+        raise ValueError(f"--reservoir_lr (the leak rate) must be in (0, 1], got {values.leak_rate}")
+    for flag, value in (("sr", values.spectral_radius), ("iss", values.input_scaling)):
+        if not (value > 0 and math.isfinite(value)):
+            raise ValueError(f"--reservoir_{flag} must be a number > 0, got {value}")
+    if evolve:
+        for (flag, (low, high)), value in zip(BOUNDS.items(), (values.leak_rate, values.spectral_radius,
+                                                                values.input_scaling)):
+            if not low < value < high:
+                raise ValueError(f"--reservoir_{flag} {value} is where --reservoir_evolve starts; it must lie "
+                                 f"strictly between ER-MRL's bounds {low:g} and {high:g}")
+    if seed is not None and not 0 <= seed < 2**31:
+        raise ValueError(f"--reservoir_seed must be a whole number from 0 to {2**31 - 1}, got {seed}")
+
+
+@njit(cache=True, nogil=True)
+def reservoir_step(w_data, w_indices, w_indptr, in_data, in_indices, in_indptr, bias, leak_rate,
+                   inputs, state, pre, features):
+    """state <- (1 - lr) state + lr tanh(W_in inputs + W state + b) on CSR matrices; features = float32(state)."""
+    for unit in range(state.shape[0]):
+        total = bias[unit]
+        for k in range(in_indptr[unit], in_indptr[unit + 1]):
+            total += in_data[k] * inputs[in_indices[k]]
+        for k in range(w_indptr[unit], w_indptr[unit + 1]):
+            total += w_data[k] * state[w_indices[k]]
+        pre[unit] = total
+    for unit in range(state.shape[0]):
+        state[unit] = (1.0 - leak_rate) * state[unit] + leak_rate * np.tanh(pre[unit])
+        features[unit] = state[unit]
+
+
+@dataclass
+class ReservoirState:
+    head: Any  # the head's own episode state
+    leak_rate: float
+    recurrent: np.ndarray  # W's non-zero entries, scaled for this episode's spectral radius
+    inputs: np.ndarray  # W_in's non-zero entries, scaled for this episode's input scaling
+    state: np.ndarray  # x, float64 (units,): zero at the start of every episode
+    pre: np.ndarray
+    features: np.ndarray  # float32 copy of x: what the head reads
+
+    def __getattr__(self, name: str):
+        """What the head's state offers (a Hebbian head's ``layer_weights``, for the adaptation plot)."""
+        if name == "head":  # not set yet: no recursion
+            raise AttributeError(name)
+        return getattr(self.head, name)
+
+
+class ReservoirFrontEnd:
+    """``head`` (built for ``units`` inputs) reading a reservoir that reads the observation."""
+
+    normalised_inputs = 0
+
+    def __init__(self, head: Policy, input_dim: int, units: int, values: Hyperparameters, seed: int,
+                 evolve: bool = False):
+        from reservoirs.esn import ReservoirMatrices  # reservoirpy: the caller has checked it is installed
+
+        check_settings(units, values, evolve, seed)
+        self.head, self.input_dim, self.units, self.values, self.seed, self.evolve = \
+            head, input_dim, units, values, seed, evolve
+        self.net = head.net  # the network the evolved weights define (the adaptation plot's layers)
+        self.matrices = ReservoirMatrices.generate(units, input_dim, seed)
+        self._recurrent = self.matrices.recurrent
+        self._inputs = self.matrices.input_signs
+        self._bias = self.matrices.bias.toarray().ravel()
+        parts = [(name, part.shape) for name, part in head.layout.parts.items()]
+        self.layout = Layout(parts + ([(ROLE, (len(BOUNDS),))] if evolve else []))
+        self.num_params = self.layout.size
+        self._head = slice(0, head.num_params)
+        self.penalised, self.penalised_name = head.penalised, head.penalised_name
+        self.roles = head.roles + ((ROLE,) if evolve else ())
+
+    def hyperparameters(self, params: np.ndarray) -> Hyperparameters:
+        """The reservoir's hyperparameters for ``params``: decoded from its genes, or the fixed ones."""
+        return hyperparameters(self.layout.view(params, ROLE)) if self.evolve else self.values
+
+    def evolved_values(self, params: np.ndarray) -> dict[str, float]:
+        """The evolved hyperparameters ``params`` encode, as metrics columns (``es.files.OPTIONAL_COLUMNS``);
+        {} when they are given, not evolved."""
+        if not self.evolve:
+            return {}
+        values = self.hyperparameters(params)
+        return {"reservoir_lr": values.leak_rate, "reservoir_sr": values.spectral_radius,
+                "reservoir_iss": values.input_scaling}
+
+    def initial_params(self, rng: np.random.Generator) -> np.ndarray:
+        head = self.head.initial_params(rng)
+        return np.concatenate([head, genes(self.values)]) if self.evolve else head
+
+    def reset(self, params: np.ndarray, rng: np.random.Generator) -> ReservoirState:
+        values = self.hyperparameters(params)
+        recurrent = self._recurrent.data * self.matrices.recurrent_factor(values.spectral_radius)
+        inputs = self._inputs.data * values.input_scaling
+        return ReservoirState(self.head.reset(params[self._head], rng), values.leak_rate, recurrent, inputs,
+                              np.zeros(self.units), np.zeros(self.units), np.zeros(self.units, dtype=np.float32))
+
+    def act(self, params: np.ndarray, state: ReservoirState, obs: np.ndarray):
+        reservoir_step(state.recurrent, self._recurrent.indices, self._recurrent.indptr, state.inputs,
+                       self._inputs.indices, self._inputs.indptr, self._bias, state.leak_rate, obs, state.state,
+                       state.pre, state.features)
+        output, state.head = self.head.act(params[self._head], state.head, state.features)
+        return output, state
+
+    def export(self, params: np.ndarray) -> dict[str, np.ndarray]:
+        arrays = self.head.export(params[self._head])
+        if self.evolve:
+            arrays[ROLE] = np.array(self.layout.view(params, ROLE), dtype=np.float32)
+        return arrays
+
+    def load(self, arrays: dict[str, np.ndarray]) -> np.ndarray:
+        head = self.head.load(arrays)
+        if not self.evolve:
+            return head
+        if arrays.get(ROLE) is None:
+            raise ValueError(f"these weights were trained with --reservoir_evolve: pass the run's evolved reservoir "
+                             f"hyperparameters too, --path_reservoir (best_{ROLE}.dat or last_{ROLE}.dat)")
+        return np.concatenate([head, check_length("the --path_reservoir file", arrays[ROLE], len(BOUNDS),
+                                                  "the reservoir's genes (lr, sr, iss)")])
+
+    def file_name(self, role: str, env: str, reward: int, population: int, generation: int) -> str:
+        return self.head.file_name(role, env, reward, population, generation)
+
+
+def head_network(net: NetworkSpec, units: int) -> NetworkSpec:
+    """The head's network: the environment's, reading ``units`` reservoir states instead of observations."""
+    if net.pixels:
+        raise ValueError(f"--reservoir reads observation vectors, but these observations are images {net.obs_shape}; "
+                         "leave --reservoir out for pixel environments")
+    return replace(net, obs_shape=(units,))
