@@ -73,7 +73,9 @@ def parse(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
     parser.add_argument("--threads", type=int, default=-1)
     parser.add_argument("--folder", type=Path, default=ROOT / "runs" / "reservoir_front")
     parser.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
-    return parser.parse_args(argv), extra
+    args = parser.parse_args(argv)
+    args.folder = args.folder.resolve()  # the scripts run in the repository root
+    return args, extra
 
 
 def the_run(folder: Path) -> Path | None:
