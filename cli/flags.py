@@ -89,6 +89,7 @@ def add_reservoir_flags(parser: argparse.ArgumentParser, evaluation: bool = Fals
     Training has ``--reservoir_evolve``; evaluation reads evolved hyperparameters from ``--path_reservoir``,
     and takes the whole reservoir from the run folder's config.json when ``--reservoir`` is not given."""
     from policies import PolicySettings
+    from policies.reservoir import BOUNDS
 
     group = parser.add_argument_group("reservoir front end (ER-MRL's echo state network before the network)")
     add = group.add_argument
@@ -116,4 +117,5 @@ def add_reservoir_flags(parser: argparse.ArgumentParser, evaluation: bool = Fals
             help="the seed of its random matrices (default: the run's --seed)")
         add("--reservoir_evolve", action="store_true",
             help="evolve its leak rate, spectral radius and input scaling with the network: three more parameters, "
-                 "log-scale within ER-MRL's bounds lr [0.01, 1], sr [1e-4, 100], iss [0.1, 10]")
+                 "log-scale within ER-MRL's bounds "
+                 + ", ".join(f"{name} [{low:g}, {high:g}]" for name, (low, high) in BOUNDS.items()))

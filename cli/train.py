@@ -183,7 +183,7 @@ def config_from_args(kind: str, args: argparse.Namespace, argv: list[str]) -> Tr
         run = RunSettings(**{**pick(RunSettings, values), "seed": seed})
         env_values = {**pick(EnvSettings, values), "env_ids": (), "recipe_modules": ()}
         EnvSettings(**env_values)  # checked before any environment is resolved
-    except ValueError as error:  # a value out of range, from a flag or an experiment file
+    except (ValueError, TypeError) as error:  # a value out of range or of the wrong type, from a flag or a file
         raise UserError(str(error)) from None
     env = EnvSettings(**{**env_values, "env_ids": resolve_environments(values["environment"]),
                          "recipe_modules": envs.custom_recipe_modules()})

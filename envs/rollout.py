@@ -30,11 +30,13 @@ def rollout(env: gym.Env, policy, params: np.ndarray, seed: int,
     """Run one episode of ``policy`` with ``params`` on ``env``, reset with ``seed``.
 
     ``observer(t, reward, state, info)``, if given, is called after every step (evaluation plots).
-    ``max_steps`` ends the episode after that many policy steps (``--variable_ep_len``'s cap, which
-    changes from one generation to the next; a fixed cap is ``envs.wrappers.MaxEpisodeSteps``).
+    ``max_steps`` ends the episode after that many environment steps, a burn-in included, the unit of
+    ``Episode.steps`` (``--variable_ep_len``'s cap, which changes from one generation to the next; a
+    fixed cap on policy steps is ``envs.wrappers.MaxEpisodeSteps``).
     """
     observation, info = env.reset(seed=int(seed))
     burn_in = int(info.get("burn_in_steps", 0))
+    limit = None if max_steps is None else max(1, max_steps - burn_in)  # in policy steps
     state = policy.reset(params, episode_rng(seed))
     act, step = policy.act, env.step
     total, steps = 0.0, 0
@@ -45,6 +47,6 @@ def rollout(env: gym.Env, policy, params: np.ndarray, seed: int,
         steps += 1
         if observer is not None:
             observer(steps, float(reward), state, info)
-        if terminated or truncated or steps == max_steps:
+        if terminated or truncated or steps == limit:
             break
     return Episode(float(total), steps + burn_in)

@@ -60,8 +60,11 @@ def evolved_values(policy, theta: np.ndarray) -> dict[str, float]:
     return decode(theta) if decode is not None else {}
 
 
+GENERATION_STREAM = 2  # the perturbations and episode seeds; the options' streams are others
+
+
 def generation_rng(seed: int, generation: int) -> np.random.Generator:
-    return np.random.default_rng([seed, 2, generation])
+    return stream_rng(seed, GENERATION_STREAM, generation)
 
 
 def stream_rng(seed: int, stream: int, generation: int) -> np.random.Generator:
@@ -97,7 +100,7 @@ class Trainer:
         self.es, self.run, self.policy, self.noise, self.evaluator = es, run, policy, noise, evaluator
         self.n_envs, self.folder, self.label, self.log = n_envs, folder, label, log
         self.display, self.reporters = display, reporters
-        self.strategy = OpenES.from_settings(es)
+        self.strategy = OpenES(es)
         self.state = self.strategy.initial_state(policy.initial_params(np.random.default_rng([run.seed, 1])))
         self.history = History()
         self.failure: Exception | None = None  # what stopped the run, if something did
@@ -110,6 +113,9 @@ class Trainer:
         """Noise table and evaluator for ``problem`` (built here, reused by the serial backend)."""
         dim = problem.policy.num_params
         es = replace(es, noise_size=es.noise_size or default_size(dim))
+        if es.noise_size < dim:  # noise_size, from an experiment file or config.json
+            raise ValueError(f"--noise_size {es.noise_size} is smaller than the {dim} parameters; leave it out "
+                             f"(the default sizes it) or give at least {dim}")
         noise = NoiseTable.create(run.seed, es.noise_size, shared=not run.in_process)
         try:
             evaluator = make_evaluator(run, build_problem, noise, dim, env_ids, problem)

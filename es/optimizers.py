@@ -106,6 +106,5 @@ OPTIMIZERS = {
 
 
 def make_optimizer(settings: ESSettings) -> Optimizer:
-    if settings.optimizer not in OPTIMIZERS:
-        raise ValueError(f"unknown optimizer {settings.optimizer!r}; valid optimizers: {', '.join(OPTIMIZERS)}")
+    """The optimiser ``settings`` name (ESSettings has checked the name)."""
     return OPTIMIZERS[settings.optimizer](settings)

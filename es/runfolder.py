@@ -47,7 +47,7 @@ class History:
     metrics: list[dict] = field(default_factory=list)
     total_steps: int = 0
     total_seconds: float = 0.0
-    episode_cap: int = 0  # --variable_ep_len: the next generation's cap on policy steps (0: none yet)
+    episode_cap: int = 0  # --variable_ep_len: the next generation's cap on env steps (0: none yet)
 
 
 @dataclass
@@ -83,10 +83,10 @@ class Checkpoint:
         return ESState(self.theta.astype(np.float32), self.lr, self.sigma, self.generation, dict(self.optimizer))
 
     def history(self, metrics: list[dict]) -> History:
-        return History(self.best_theta if self.best_theta.size else None, self.best_center,
-                       RunningStat.from_arrays(self.best_observations),
-                       [float(value) for value in self.fitness_log], metrics, self.total_steps, self.total_seconds,
-                       self.episode_cap)
+        return History(best_theta=self.best_theta if self.best_theta.size else None, best_center=self.best_center,
+                       best_observations=RunningStat.from_arrays(self.best_observations),
+                       fitness_log=[float(value) for value in self.fitness_log], metrics=metrics,
+                       total_steps=self.total_steps, total_seconds=self.total_seconds, episode_cap=self.episode_cap)
 
     def to_bytes(self) -> bytes:
         arrays = {}
@@ -209,7 +209,10 @@ class RunFolder:
     # --- config and metrics -------------------------------------------------------------------
 
     def read_config(self) -> dict:
-        return files.read_json(self.path / "config.json")
+        data = files.read_json(self.path / "config.json")
+        if not isinstance(data, dict):
+            raise RunFolderError(f"--resume {self.path}: config.json is not a JSON object")
+        return data
 
     def write_config(self, data: dict) -> None:
         self.write(files.write_json, "config.json", data)

@@ -29,6 +29,27 @@ def check_choice(name: str, value: str, choices) -> None:
     check_setting(name, repr(value), value in choices, f"one of {', '.join(choices)}")
 
 
+def is_number(value) -> bool:
+    """A finite int or float (an experiment file or config.json can hold anything: a string, a bool)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def is_whole(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def check_number(name: str, value, low: float, high: float = math.inf, low_open: bool = False) -> None:
+    """``value`` a finite number in [low, high] ((low, high] with ``low_open``)."""
+    valid = is_number(value) and (low < value if low_open else low <= value) and value <= high
+    bounds = f"{'(' if low_open else '['}{low:g}, {high:g}]" if high < math.inf else \
+        f"{'>' if low_open else '>='} {low:g}"
+    check_setting(name, value, valid, f"a number {'in ' if high < math.inf else ''}{bounds}")
+
+
+def check_whole(name: str, value, low: int) -> None:
+    check_setting(name, value, is_whole(value) and value >= low, f"a whole number >= {low}")
+
+
 @dataclass(frozen=True)
 class ESSettings:
     """What defines the search: two runs with equal ESSettings (and seed) step alike."""
@@ -55,18 +76,27 @@ class ESSettings:
     variable_ep_len: bool = False  # pytorch-es: cap each generation's episodes at twice the last one's mean length
 
     def __post_init__(self) -> None:
-        check_choice("shaping", self.shaping, SHAPINGS)
-        check_choice("optimizer", self.optimizer, OPTIMIZERS)
+        """Every value checked, whether it came from a flag, an experiment file or a config.json."""
+        check_whole("popsize", self.popsize, 2)
+        for name in ("lr", "sigma"):
+            check_number(name, getattr(self, name), 0, low_open=True)
+        for name in ("decay", "sigma_decay"):
+            check_number(name, getattr(self, name), 0, 1, low_open=True)
+        check_setting("obs_norm_prob", self.obs_norm_prob, is_number(self.obs_norm_prob) and 0 < self.obs_norm_prob <= 1,
+                      "in (0, 1]")
+        for name in ("lr_floor", "sigma_floor", "l2coeff", "fitness_l2"):
+            check_number(name, getattr(self, name), 0)
         for name in ("beta1", "beta2", "momentum"):
             value = getattr(self, name)
-            check_setting(name, value, 0 <= value < 1, "in [0, 1)")
-        for name in ("l2coeff", "fitness_l2"):
-            value = getattr(self, name)
-            check_setting(name, value, 0 <= value < math.inf, "a number >= 0")
-        check_setting("obs_norm_prob", self.obs_norm_prob, 0 < self.obs_norm_prob <= 1, "in (0, 1]")
-        check_setting("eval_every", self.eval_every, self.eval_every is None or self.eval_every >= 1,
-                      "a whole number >= 1")
-        check_setting("eval_episodes", self.eval_episodes, self.eval_episodes >= 1, "a whole number >= 1")
+            check_setting(name, value, is_number(value) and 0 <= value < 1, "in [0, 1)")
+        check_whole("episodes", self.episodes, 1)
+        check_whole("eval_episodes", self.eval_episodes, 1)
+        if self.eval_every is not None:
+            check_whole("eval_every", self.eval_every, 1)
+        if self.noise_size is not None:
+            check_whole("noise_size", self.noise_size, 1)
+        check_choice("shaping", self.shaping, SHAPINGS)
+        check_choice("optimizer", self.optimizer, OPTIMIZERS)
 
     def evaluates_centre(self, generation: int) -> bool:
         """Whether the centre runs its evaluation episodes in generation ``generation`` (0-based):
@@ -86,6 +116,14 @@ class RunSettings:
     backend: str = "process"  # "process" or "ray"
     ray_address: str | None = None  # --backend ray: None starts a local Ray
     tensorboard: bool = False  # also write every metrics column as TensorBoard scalars
+
+    def __post_init__(self) -> None:
+        check_whole("generations", self.generations, 1)
+        check_whole("print_every", self.print_every, 1)
+        check_setting("threads", self.threads, is_whole(self.threads) and (self.threads == -1 or self.threads >= 1),
+                      "-1 (all cores) or a whole number >= 1")
+        check_setting("seed", self.seed, is_whole(self.seed) and 0 <= self.seed < 2**31,
+                      f"a whole number from 0 to {2**31 - 1}")
 
     @property
     def workers(self) -> int:

@@ -10,7 +10,7 @@ Algorithm 2, as adapted by Najarro & Risi 2020 (upstream spec §2.1):
 - schedules: lr *= decay while lr > lr_floor; sigma *= sigma_decay while sigma > sigma_floor,
   whatever the optimiser (lr is its step size).
 
-``OpenES.from_settings`` picks the shaping and the optimiser the settings name (``--shaping``,
+``OpenES(settings)`` picks the shaping and the optimiser the settings name (``--shaping``,
 ``--optimizer``) from their registries.
 
 The perturbations eps_p are slices of a shared noise table (``es.noise``), so a member is only a
@@ -25,9 +25,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from es.noise import NoiseTable
-from es.optimizers import SGD, Optimizer, OptimizerState, make_optimizer
+from es.optimizers import Optimizer, OptimizerState, make_optimizer
 from es.settings import ESSettings
-from es.shaping import SHAPINGS, Shaping, rank_std
+from es.shaping import SHAPINGS, Shaping
 
 
 @dataclass(frozen=True)
@@ -50,14 +50,14 @@ def decay_sigma(sigma: float, settings: ESSettings) -> float:
 @dataclass(frozen=True)
 class OpenES:
     settings: ESSettings
-    shaping: Shaping = rank_std
-    optimizer: Optimizer = SGD()
-
-    @classmethod
-    def from_settings(cls, settings: ESSettings) -> "OpenES":
-        return cls(settings, SHAPINGS[settings.shaping], make_optimizer(settings))
+    shaping: Shaping | None = None  # default: the one settings.shaping names
+    optimizer: Optimizer | None = None  # default: the one settings.optimizer names
 
     def __post_init__(self) -> None:
+        if self.shaping is None:
+            object.__setattr__(self, "shaping", SHAPINGS[self.settings.shaping])
+        if self.optimizer is None:
+            object.__setattr__(self, "optimizer", make_optimizer(self.settings))
         size = self.settings.popsize
         if size < 2 or size % 2:
             raise ValueError(f"population size must be even and >= 2, got {size}")

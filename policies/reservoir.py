@@ -52,11 +52,11 @@ from numba import njit
 from policies.base import Policy
 from policies.network import Layout, NetworkSpec
 from policies.static import check_length
+from reservoirs import SEARCH_BOUNDS
 
 ROLE = "reservoir"  # the file role (and layout part) of the evolved hyperparameters
-# ER-MRL's default search bounds (--min_lr 1e-2 --max_lr 1, --min_sr 1e-4 --max_sr 1e2, --min_iss 1e-1
-# --max_iss 10), in the order of the genes
-BOUNDS: dict[str, tuple[float, float]] = {"lr": (1e-2, 1.0), "sr": (1e-4, 1e2), "iss": (1e-1, 10.0)}
+# ER-MRL's default search bounds, in the order of the genes
+BOUNDS: dict[str, tuple[float, float]] = {name: SEARCH_BOUNDS[name] for name in ("lr", "sr", "iss")}
 MAX_UNITS = 10_000  # each worker holds its own matrices, and their eigenvalue solve grows with units^2
 
 

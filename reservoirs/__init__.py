@@ -6,8 +6,8 @@ loop trains a PPO agent (stable-baselines3) from scratch on the reservoir's stat
 observation. Upstream spec §8 and §9.3 describe the original; README "Evolved reservoirs (ER-MRL)"
 says what changed.
 
-    esn.py          the echo state network: reservoirpy 0.4 with reservoirpy 0.3's semantics; a small
-                    numpy-level class (reset / step on one input) that other front ends can reuse
+    esn.py          the echo state network: reservoirpy 0.4 with reservoirpy 0.3's semantics (reset / step
+                    on one input); its random draws, which policies.reservoir rescales per member
     wrappers.py     the Gymnasium wrappers of the original, one concern each
     experiments.py  search space, environment presets, target and random returns, the normalised score
     training.py     the inner loop: PPO with SB3's defaults, and a trial's fitness
@@ -27,6 +27,9 @@ EXTRA_MODULES = {"reservoirpy": "reservoirpy", "stable_baselines3": "stable-base
                  "cmaes": "cmaes"}
 TEST_MODULES = {**EXTRA_MODULES, "tensorboard": "tensorboard"}
 INSTALL_HINT = "pip install -r requirements-reservoirs.txt (or pip install -e .[reservoirs])"
+# ER-MRL's search bounds of each reservoir hyperparameter (its --min_* / --max_* defaults), in its scripts'
+# order: the scripts' defaults, and the range policies.reservoir maps evolved genes into
+SEARCH_BOUNDS: dict[str, tuple[float, float]] = {"sr": (1e-4, 1e2), "lr": (1e-2, 1.0), "iss": (1e-1, 10.0)}
 
 
 def missing_packages(modules: dict[str, str]) -> list[str]:

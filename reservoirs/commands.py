@@ -26,28 +26,24 @@ import optuna
 import torch
 
 import envs
-from cli.errors import USER_ERRORS, Parser, explained
-from cli.flags import flag_value, positive_float, positive_int
-from es.files import write_json
-from cli.errors import UserError
-from reservoirs import experiments
+from cli.errors import USER_ERRORS, Parser, UserError, explained
+from cli.errors import say as log
+from cli.flags import flag_value, positive_float, positive_int, seed_value
+from es.files import atomic_write_text, write_json
+from reservoirs import SEARCH_BOUNDS, experiments
 from reservoirs.esn import ReservoirSettings
 from reservoirs.experiments import ENV_TYPES, TARGET_RETURN, SearchSpace, env_ids_for, reservoirs_from_params
 from reservoirs.study import (SAMPLERS, journal_path, load_evolved, open_study, recorded_settings, safe_file_name,
                               study_name)
-from reservoirs.training import InnerLoop, NoFinishedEpisode, ReservoirFrontEnd, make_base_env, train_ppo
+from reservoirs.training import InnerLoop, NoFinishedEpisode, PPOFrontEnd, make_base_env, train_ppo
 from reservoirs.wrappers import RewardsSavingWrapper
 
-DEFAULT_BOUNDS = {"sr": (1e-4, 1e2), "lr": (1e-2, 1.0), "iss": (1e-1, 10.0)}
+DEFAULT_BOUNDS = SEARCH_BOUNDS
 SLURM_SEED = "SLURM_ARRAY_TASK_ID"
 # test scripts: model name -> PPO learning rate (the original's get_models and lists)
 MODELS_TEST = {"PPO": 3e-4, "RES_PPO_0.0003": 3e-4, "RES_PPO_0.0001": 1e-4}
 MODELS_DEL_OBS = {**MODELS_TEST, "RES_PPO_0.00005": 5e-5}
 MODELS_GENERALIZATION = {"PPO": 3e-4, "RES_PPO_0.0003": 3e-4}
-
-
-def log(line: str) -> None:
-    print(line, flush=True)
 
 
 def new_parser(prog: str, description: str) -> Parser:
@@ -73,7 +69,7 @@ def add_search_flags(parser: Parser, sampler_default: str | None, fixed_iss_defa
     add_training_steps(parser, required=True, help="PPO training steps of each lifetime")
     add("--sampler", choices=SAMPLERS, required=sampler_default is None, default=sampler_default,
         help="Cmaes: CMA-ES with IPOP restarts; Tpe; Random")
-    add("--sampler_seed", type=int, default=None,
+    add("--sampler_seed", type=seed_value, default=None,
         help="seed of the sampler (None: a random one); processes sharing a study need different seeds")
     add("--nb_seeds", type=positive_int, default=3, help="training seeds 0 .. nb_seeds-1 per environment")
     add("--ep_eval", type=positive_int, default=10, help="fitness: mean return of the last ep_eval episodes")
@@ -94,8 +90,8 @@ def search_space(args: argparse.Namespace, nb_res: int, suffixed: bool) -> Searc
 
 def search_settings(args: argparse.Namespace, space: SearchSpace, **extra) -> dict:
     """What a study records, and what a later process must not change."""
-    return {"units": args.units, "nb_res": space.nb_res, "skip_c": args.skip_c, "fixed_iss": args.fixed_iss,
-            "zero_action": args.zero_action, "nb_seeds": args.nb_seeds, "ep_eval": args.ep_eval,
+    return {"units": args.units, "training_steps": args.training_steps, "nb_res": space.nb_res,
+            "skip_c": args.skip_c, "fixed_iss": args.fixed_iss, "zero_action": args.zero_action, "nb_seeds": args.nb_seeds, "ep_eval": args.ep_eval,
             "bounds": {name: list(bounds) for name, bounds in space.bounds.items()}, **extra}
 
 
@@ -179,28 +175,31 @@ def evolve(prog: str, args: argparse.Namespace, name: str, env_ids: tuple[str, .
     return 0
 
 
-def evolve_res(prog: str, args: argparse.Namespace) -> int:
+def evolve_one_env(prog: str, args: argparse.Namespace, several: bool) -> int:
+    """evolve_res.py (one reservoir) and evolve_multi_res.py (``--nb_res``, parameters lr_1, sr_1, ...)."""
     env_id = resolve_env(args.env_id)
-    space = search_space(args, 1, suffixed=False)
-    loop = InnerLoop(ReservoirFrontEnd(False, args.skip_c, args.zero_action), args.training_steps, args.nb_seeds,
-                     args.ep_eval, args.del_obs)
-    name = study_name(args.env_id, args.h_test, training_steps=args.training_steps)
-    test = (f"python scripts/test.py --env_id {args.env_id} --h_test {args.h_test} --HP_training_steps "
-            f"{args.training_steps}")
+    nb_res = args.nb_res if several else 1
+    space = search_space(args, nb_res, suffixed=several)
+    loop = InnerLoop(PPOFrontEnd(args.skip_c, args.zero_action), args.training_steps, args.nb_seeds, args.ep_eval,
+                     args.del_obs)
+    if several:
+        name = study_name(args.env_id, nb_res, args.h_test, training_steps=args.training_steps)
+        test = (f"python scripts/test_multi_res.py --env_id {args.env_id} --h_test {args.h_test} --nb_res {nb_res} "
+                f"--HP_training_steps {args.training_steps}")
+    else:
+        name = study_name(args.env_id, args.h_test, training_steps=args.training_steps)
+        test = (f"python scripts/test.py --env_id {args.env_id} --h_test {args.h_test} --HP_training_steps "
+                f"{args.training_steps}")
     return evolve(prog, args, name, (env_id,), space, loop, None,
                   search_settings(args, space, env=args.env_id, del_obs=args.del_obs), test)
+
+
+def evolve_res(prog: str, args: argparse.Namespace) -> int:
+    return evolve_one_env(prog, args, several=False)
 
 
 def evolve_multi_res(prog: str, args: argparse.Namespace) -> int:
-    env_id = resolve_env(args.env_id)
-    space = search_space(args, args.nb_res, suffixed=True)
-    loop = InnerLoop(ReservoirFrontEnd(True, args.skip_c, args.zero_action), args.training_steps, args.nb_seeds,
-                     args.ep_eval, args.del_obs)
-    name = study_name(args.env_id, args.nb_res, args.h_test, training_steps=args.training_steps)
-    test = (f"python scripts/test_multi_res.py --env_id {args.env_id} --h_test {args.h_test} --nb_res {args.nb_res} "
-            f"--HP_training_steps {args.training_steps}")
-    return evolve(prog, args, name, (env_id,), space, loop, None,
-                  search_settings(args, space, env=args.env_id, del_obs=args.del_obs), test)
+    return evolve_one_env(prog, args, several=True)
 
 
 def evolve_generalization(prog: str, args: argparse.Namespace) -> int:
@@ -208,8 +207,7 @@ def evolve_generalization(prog: str, args: argparse.Namespace) -> int:
         env_ids = tuple(resolve_env(env_id) for env_id in env_ids_for(args.env_type))
         experiments.check_normalisable(env_ids, args.random_baseline)
     space = search_space(args, args.nb_res, suffixed=True)
-    loop = InnerLoop(ReservoirFrontEnd(True, args.skip_c, args.zero_action), args.training_steps, args.nb_seeds,
-                     args.ep_eval)
+    loop = InnerLoop(PPOFrontEnd(args.skip_c, args.zero_action), args.training_steps, args.nb_seeds, args.ep_eval)
     name = study_name(args.env_type, args.nb_res, args.h_test, training_steps=args.training_steps)
     test = (f"python scripts/test_generalization.py --env_id <an unseen id> --HP_env_type {args.env_type} "
             f"--h_test {args.h_test} --nb_res {args.nb_res} --HP_training_steps {args.training_steps}")
@@ -224,9 +222,9 @@ def slurm_seed() -> int:
     """The original's seed for a test run: the SLURM array task id, or 0."""
     text = os.environ.get(SLURM_SEED) or "0"
     try:
-        return int(text)
-    except ValueError:
-        raise UserError(f"{SLURM_SEED}={text!r} is not a whole number; unset it or give --seed") from None
+        return seed_value(text)
+    except (ValueError, argparse.ArgumentTypeError) as error:
+        raise UserError(f"{SLURM_SEED}={text!r}: {error}; unset it or give --seed") from None
 
 
 def add_test_flags(parser: Parser) -> None:
@@ -236,7 +234,7 @@ def add_test_flags(parser: Parser) -> None:
     add("--h_test", required=True, help="the --h_test of the evolution")
     add("--HP_training_steps", type=positive_int, default=300000, help="the --training_steps of the evolution")
     add_training_steps(parser, default=10000000, help="PPO training steps of each model")
-    add("--seed", type=int, default=None, help=f"seed of the reservoirs and PPO (default: ${SLURM_SEED}, else 0)")
+    add("--seed", type=seed_value, default=None, help=f"seed of the reservoirs and PPO (default: ${SLURM_SEED}, else 0)")
     add("--units", type=positive_int, default=None, help="neurons per reservoir (default: the study's, else 100)")
     add_bool(parser, "skip_c", None, "as in the evolution (default: the study's, else False)")
     add_bool(parser, "zero_action", None, "as in the evolution (default: the study's, else False)")
@@ -281,7 +279,7 @@ class TestSetup:
 
     study: optuna.Study
     reservoirs: list[ReservoirSettings]
-    front_end: ReservoirFrontEnd
+    front_end: PPOFrontEnd
     del_obs: bool
     ep_eval: int
 
@@ -293,7 +291,7 @@ def load_test_setup(args: argparse.Namespace, name: str, evolve_hint: str, env_i
         recorded = recorded_settings(study)
         units, fixed_iss = chosen(args, recorded, "units", 100), chosen(args, recorded, "fixed_iss", fixed_iss_default)
         del_obs = chosen(args, recorded, "del_obs", False)
-        front_end = ReservoirFrontEnd(several, chosen(args, recorded, "skip_c", False),
+        front_end = PPOFrontEnd(chosen(args, recorded, "skip_c", False),
                                       chosen(args, recorded, "zero_action", False))
         reservoirs = reservoirs_from_params(study.best_params, units, nb_res, fixed_iss, suffixed=several)
         front_end.wrap(make_base_env(env_id, del_obs), reservoirs, seed).close()
@@ -388,6 +386,11 @@ def random_scores_parser(prog: str) -> Parser:
 def get_random_scores(prog: str, args: argparse.Namespace) -> int:
     with explained("--env_ids"):
         env_ids = [resolve_env(env_id.strip()) for env_id in args.env_ids.split(",") if env_id.strip()]
+    if not env_ids:
+        raise UserError(f"--env_ids {args.env_ids!r} names no environment; give ids separated by commas")
+    output = Path(args.output)
+    if output.is_dir() or not output.resolve().parent.is_dir():
+        raise UserError(f"--output {args.output} must be a file in an existing folder")
     lines = []
     for env_id in env_ids:
         with explained(f"cannot make {env_id}"):
@@ -395,7 +398,7 @@ def get_random_scores(prog: str, args: argparse.Namespace) -> int:
         lines.append(f"env: {env_id} score: {score}")
         log(lines[-1])
     with explained(f"cannot write {args.output}"):
-        Path(args.output).write_text("\n".join(lines) + "\n")
+        atomic_write_text(output, "\n".join(lines) + "\n")
     return 0
 
 
@@ -424,3 +427,6 @@ def main(script: str, argv: list[str] | None = None) -> int:
     except USER_ERRORS as error:
         print(f"{prog}: error: {error}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # Ctrl-C, or SIGTERM (reservoirs.run_script), outside a study's trials
+        print(f"{prog}: stopped", file=sys.stderr)
+        return 130

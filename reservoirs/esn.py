@@ -25,8 +25,9 @@ Rescaling a unit-radius matrix instead, (W / ρ) · sr or (W · (1 / ρ)) · sr,
 100-unit reservoir, 26 % to 88 % of W's non-zero entries then differ from W · (sr / ρ) by 1 or 2 in the
 last bit (at most 4.4e-16 relative), enough for states, and so episodes, to drift apart eventually.
 
-``EchoStateNetwork`` is deliberately small and numpy-level, one input vector in, the state out, so
-that any front end (a Gymnasium wrapper here, an evolved network's input layer elsewhere) can use it.
+``EchoStateNetwork`` is one reservoir behind a small interface, one input vector in, the state out: the
+Gymnasium wrappers use it, on reservoirpy's node (bit-identical to reservoirpy 0.3). The ES networks'
+front end (``policies.reservoir``) takes only ``ReservoirMatrices`` and steps them in one compiled call.
 """
 
 from __future__ import annotations
@@ -128,10 +129,6 @@ class EchoStateNetwork:
         self._node = Reservoir(units=units, lr=settings.leak_rate, W=weights, Win=input_weights,
                                bias=_dense(bias).ravel(), input_dim=input_dim)
         self._node.initialize(np.zeros(input_dim))  # 0.4 cannot reset a node before it has state
-
-    @property
-    def units(self) -> int:
-        return self.settings.units
 
     @property
     def state(self) -> np.ndarray:

@@ -13,6 +13,7 @@ would mix other settings into it is refused, and the test scripts rebuild the re
 
 from __future__ import annotations
 
+import json
 import warnings
 from pathlib import Path
 
@@ -69,12 +70,33 @@ def open_journal(path: Path) -> JournalStorage:
     return JournalStorage(JournalFileBackend(str(path)))
 
 
+def check_journal(path: Path) -> None:
+    """Refuse a journal with a line that is not JSON, before optuna reads or appends to it: optuna skips
+    a bad last line at first and fails on it in the middle of a trial once it has appended after it."""
+    if not path.is_file():
+        return
+    with open(path, "rb") as handle:
+        for number, line in enumerate(handle, 1):
+            if not line.endswith(b"\n"):  # another process's write in progress, as optuna reads it
+                break
+            try:
+                json.loads(line)
+            except ValueError:
+                raise ValueError(f"the journal {path} is corrupt (line {number} is not JSON); move it away, or give "
+                                 "another --h_test") from None
+
+
 def open_study(name: str, settings: dict, sampler: str, sampler_seed: int | None) -> optuna.Study:
     """Create the study, or load it if its journal has it; refuse settings that differ from its own."""
-    storage = open_journal(journal_path(name))
+    path = journal_path(name)
+    check_journal(path)
+    storage = open_journal(path)
     try:  # loading first writes nothing, so a refused command leaves the journal as it was
         study = optuna.load_study(study_name=name, storage=storage)
     except KeyError:
+        if path.is_file() and path.stat().st_size:  # a journal of this name holds this study, or is not one
+            raise ValueError(f"{path} holds no readable study {name!r} (is it corrupt?); move it away, or give "
+                             "another --h_test") from None
         study = optuna.create_study(study_name=name, storage=storage, direction="maximize", load_if_exists=True)
     recorded = study.user_attrs.get(SETTINGS_ATTR)
     if recorded is None:
@@ -94,6 +116,7 @@ def load_evolved(name: str, evolve_hint: str) -> optuna.Study:
     path = journal_path(name)
     if not path.is_file():
         raise ValueError(f"no journal {path} in {Path.cwd()}; evolve it first: {evolve_hint}")
+    check_journal(path)
     try:
         study = optuna.load_study(study_name=name, storage=open_journal(path))
     except KeyError:

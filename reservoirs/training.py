@@ -23,7 +23,7 @@ from stable_baselines3 import PPO
 
 from reservoirs.esn import ReservoirSettings
 from reservoirs.experiments import normalised_score
-from reservoirs.wrappers import DeletedVelocityWrapper, MultiReservoirWrapper, ReservoirWrapper, RewardsSavingWrapper
+from reservoirs.wrappers import DeletedVelocityWrapper, MultiReservoirWrapper, RewardsSavingWrapper
 
 
 class NoFinishedEpisode(Exception):
@@ -45,24 +45,22 @@ def train_ppo(env: gym.Env, seed: int, training_steps: int, learning_rate: float
 
 
 @dataclass(frozen=True)
-class ReservoirFrontEnd:
-    """How the agent sees its environment: the reservoir wrapper a script puts around it."""
+class PPOFrontEnd:
+    """How the PPO agent sees its environment: the reservoirs a script puts around it (one or several,
+    ``MultiReservoirWrapper``; ``policies.reservoir`` is the ES networks' front end)."""
 
-    several: bool  # MultiReservoirWrapper (evolve_multi_res, evolve_generalization) or ReservoirWrapper
     skip_c: bool = False
     zero_action: bool = False
 
     def wrap(self, env: gym.Env, reservoirs: list[ReservoirSettings], seed: int) -> gym.Env:
-        if self.several:
-            return MultiReservoirWrapper(env, reservoirs, seed, skip_c=self.skip_c, zero_action=self.zero_action)
-        return ReservoirWrapper(env, reservoirs[0], seed, skip_c=self.skip_c, zero_action=self.zero_action)
+        return MultiReservoirWrapper(env, reservoirs, seed, skip_c=self.skip_c, zero_action=self.zero_action)
 
 
 @dataclass(frozen=True)
 class InnerLoop:
     """One trial's lifetimes: for each environment and training seed, a PPO agent trained from scratch."""
 
-    front_end: ReservoirFrontEnd
+    front_end: PPOFrontEnd
     training_steps: int
     nb_seeds: int = 3
     ep_eval: int = 10

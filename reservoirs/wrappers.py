@@ -61,13 +61,11 @@ class TransitionEncoder:
 class _ReservoirContext(gym.Wrapper):
     """Feeds each transition to ``reservoirs`` and shows the agent ``context(states, inputs)``."""
 
-    def __init__(self, env: gym.Env, settings: Sequence[ReservoirSettings], seed: int, zero_action: bool,
-                 reset_res: bool = True):
+    def __init__(self, env: gym.Env, settings: Sequence[ReservoirSettings], seed: int, zero_action: bool):
         super().__init__(env)
         self.encoder = TransitionEncoder(env.observation_space, env.action_space, zero_action)
         # seed + index, as the original's MultiReservoirWrapper (one reservoir: the seed itself)
         self.reservoirs = [EchoStateNetwork(self.encoder.size, one, seed + index) for index, one in enumerate(settings)]
-        self.reset_res = reset_res
         self.last_input: np.ndarray | None = None  # what the reservoirs read last (for tests and analysis)
 
     def context(self, states: list[np.ndarray], inputs: np.ndarray) -> np.ndarray:
@@ -78,9 +76,8 @@ class _ReservoirContext(gym.Wrapper):
         return self.context([reservoir.step(inputs) for reservoir in self.reservoirs], inputs)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        if self.reset_res:
-            for reservoir in self.reservoirs:
-                reservoir.reset()
+        for reservoir in self.reservoirs:
+            reservoir.reset()
         observation, info = self.env.reset(seed=seed, options=options)
         return self._feed(self.encoder.encode(observation, None, 0.0)), info
 
@@ -102,28 +99,14 @@ def _skip_connection_space(env: gym.Env, units: int, input_size: int) -> spaces.
     return spaces.Box(low=low, high=high, shape=(units + input_size,), dtype=np.float64)
 
 
-class ReservoirWrapper(_ReservoirContext):
-    """The agent sees one reservoir's state; with ``skip_c``, followed by (observation, action, reward)."""
-
-    def __init__(self, env: gym.Env, settings: ReservoirSettings, seed: int = 42, skip_c: bool = False,
-                 zero_action: bool = False, reset_res: bool = True):
-        super().__init__(env, [settings], seed, zero_action, reset_res)
-        self.skip_c = skip_c
-        self.observation_space = (_skip_connection_space(env, settings.units, self.encoder.size) if skip_c
-                                  else _context_space(settings.units))
-
-    def context(self, states: list[np.ndarray], inputs: np.ndarray) -> np.ndarray:
-        return np.concatenate((states[0], inputs)) if self.skip_c else states[0]
-
-
 class MultiReservoirWrapper(_ReservoirContext):
     """Several reservoirs (seeds ``seed``, ``seed + 1``, ...) read the same input; the agent sees their states."""
 
     def __init__(self, env: gym.Env, settings: Sequence[ReservoirSettings], seed: int = 42, skip_c: bool = False,
-                 zero_action: bool = False, reset_res: bool = True):
+                 zero_action: bool = False):
         if not settings:
             raise ValueError("MultiReservoirWrapper needs at least one reservoir")
-        super().__init__(env, settings, seed, zero_action, reset_res)
+        super().__init__(env, settings, seed, zero_action)
         self.skip_c = skip_c
         units = sum(one.units for one in settings)
         self.observation_space = (_skip_connection_space(env, units, self.encoder.size) if skip_c
@@ -133,14 +116,22 @@ class MultiReservoirWrapper(_ReservoirContext):
         return np.concatenate((*states, inputs) if self.skip_c else states)
 
 
+class ReservoirWrapper(MultiReservoirWrapper):
+    """The agent sees one reservoir's state; with ``skip_c``, followed by (observation, action, reward)."""
+
+    def __init__(self, env: gym.Env, settings: ReservoirSettings, seed: int = 42, skip_c: bool = False,
+                 zero_action: bool = False):
+        super().__init__(env, [settings], seed, skip_c, zero_action)
+
+
 class POReservoirWrapper(_ReservoirContext):
     """The agent sees only the first ``obs_units`` of the reservoir's ``units`` neurons."""
 
     def __init__(self, env: gym.Env, settings: ReservoirSettings, obs_units: int, seed: int = 42,
-                 zero_action: bool = False, reset_res: bool = True):
+                 zero_action: bool = False):
         if not 1 <= obs_units <= settings.units:
             raise ValueError(f"obs_units must be between 1 and the reservoir's {settings.units} units, got {obs_units}")
-        super().__init__(env, [settings], seed, zero_action, reset_res)
+        super().__init__(env, [settings], seed, zero_action)
         self.obs_units = obs_units
         self.observation_space = _context_space(obs_units)
 

@@ -35,12 +35,11 @@ class BackendUnavailable(ValueError):
 
 
 def make_evaluator(run: RunSettings, build_problem: Callable[[], object], noise: NoiseTable, dim: int,
-                   env_ids: tuple[str, ...], problem: object | None = None) -> Evaluator:
-    """The evaluator ``run`` asks for; ``problem``, if given, is reused by the serial one."""
+                   env_ids: tuple[str, ...], problem: object) -> Evaluator:
+    """The evaluator ``run`` asks for; ``problem`` (built already) is reused by the serial one, closed otherwise."""
     if run.in_process:
-        return SerialEvaluator((lambda: problem) if problem is not None else build_problem, noise, dim, env_ids)
-    if problem is not None:
-        problem.close()
+        return SerialEvaluator(lambda: problem, noise, dim, env_ids)
+    problem.close()
     if run.backend == "process":
         return ProcessEvaluator(build_problem, noise, dim, env_ids, run.workers)
     if run.backend == "ray":
