@@ -9,6 +9,7 @@ flat object) are read too.
 from __future__ import annotations
 
 import tomllib
+import types
 import typing
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
@@ -66,16 +67,42 @@ def field_names(settings: type) -> set[str]:
 
 
 def section(values: dict, settings: type):
-    """A settings dataclass from a dict: known fields only, lists back to tuples where the field is one."""
+    """A settings dataclass from a dict: known fields only, each of its field's type (``check_type``),
+    lists back to tuples where the field is one."""
     hints = typing.get_type_hints(settings)
     known = {}
     for name in field_names(settings):
         if name in values:
             value = values[name]
+            check_type(name, value, hints[name])
             if isinstance(value, list) and typing.get_origin(hints[name]) is tuple:
                 value = tuple(value)
             known[name] = value
     return settings(**known)
+
+
+TYPE_NAMES = {bool: "true or false", int: "a whole number", float: "a number", str: "a string", type(None): "none"}
+
+
+def _matches(value, hint) -> bool:
+    if typing.get_origin(hint) in (typing.Union, types.UnionType):
+        return any(_matches(value, option) for option in typing.get_args(hint))
+    if typing.get_origin(hint) is tuple:
+        return isinstance(value, (list, tuple))
+    if hint is float:
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+    if hint is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    return isinstance(value, hint)
+
+
+def check_type(name: str, value, hint) -> None:
+    """Refuse a value of another type than its setting's (an experiment file or config.json can hold
+    anything: ``reservoir = "false"`` would otherwise be true)."""
+    if not _matches(value, hint):
+        options = typing.get_args(hint) if typing.get_origin(hint) in (typing.Union, types.UnionType) else (hint,)
+        expected = " or ".join(TYPE_NAMES.get(option, "a list") for option in options)
+        raise ValueError(f"{name} must be {expected}, got {value!r}")
 
 
 def read_toml(path: str | Path) -> dict:

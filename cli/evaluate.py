@@ -147,20 +147,22 @@ def trained_with_obs_norm(weight_file: Path) -> bool:
 
 
 def reservoir_options(args: argparse.Namespace, argv: list[str], weight_file: Path) -> dict:
-    """The reservoir settings to evaluate with: the flags' with ``--reservoir`` (the seed, unless given, the
-    run folder's); without it, those of the run folder's config.json, if it records a reservoir; else none."""
+    """The reservoir settings to evaluate with: with ``--reservoir``, the flags given, and for the others the
+    run folder's config.json (if it records a reservoir), else the flags' defaults; without it, the run
+    folder's reservoir, if any; else none."""
     given = sorted(given_flags(argv) & {*RESERVOIR_FLAGS, "path_reservoir"})
-    stored = trained_policy(weight_file)
+    trained = trained_policy(weight_file)
+    stored = trained if trained.get("reservoir") else {}
     if args.reservoir:
-        options = {name: getattr(args, name) for name in RESERVOIR_FLAGS}
-        if options["reservoir_seed"] is None and stored.get("reservoir"):  # the seed the run drew its matrices with
-            options["reservoir_seed"] = stored.get("reservoir_seed")
-        return dict(reservoir=True, reservoir_evolve=args.path_reservoir is not None, **options)
+        options = {name: getattr(args, name) if name in given else stored.get(name, getattr(args, name))
+                   for name in RESERVOIR_FLAGS}
+        evolved = args.path_reservoir is not None or bool(stored.get("reservoir_evolve"))
+        return dict(reservoir=True, reservoir_evolve=evolved, **options)
     extra = [name for name in given if name != "path_reservoir" or not stored.get("reservoir_evolve")]
     if extra:
         raise UserError(f"--{extra[0]} has an effect only with --reservoir (or, for --path_reservoir, weights of a "
                         f"--reservoir_evolve run); add --reservoir or leave --{extra[0]} out")
-    if not stored.get("reservoir"):
+    if not stored:
         return {}
     say(f"reservoir: as {weight_file.parent / 'config.json'} records it")
     return {name: stored[name] for name in ("reservoir", "reservoir_evolve", *RESERVOIR_FLAGS) if name in stored}

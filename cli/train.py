@@ -11,11 +11,12 @@ import argparse
 import os
 import secrets
 import sys
+import typing
 from dataclasses import fields
 from pathlib import Path
 
 import envs
-from cli.config import SECTIONS, TrainConfig, field_names, read_toml
+from cli.config import SECTIONS, TrainConfig, check_type, field_names, read_toml
 from cli.errors import USER_ERRORS, Parser, UserError, explained, say
 from cli.flags import RESERVOIR_FLAGS, fraction, non_empty, positive_float, positive_int, seed_value, threads_value
 from cli.hints import TRAIN_SCRIPTS, evaluate_hint, resume_hint
@@ -169,13 +170,14 @@ def check_population_fits(es: ESSettings, n_envs: int) -> None:
 def config_from_args(kind: str, args: argparse.Namespace, argv: list[str]) -> TrainConfig:
     """The flags' values, over those of the experiment file ``--config`` names, if any."""
     values = {name: value for name, value in vars(args).items() if name not in ("resume", "config")}
+    given = given_flags(argv)
     if args.config is not None:
-        given = given_flags(argv)
-        values.update({name: value for name, value in experiment_values(args.config, kind).items()
-                       if name not in given})
+        from_file = {name: value for name, value in experiment_values(args.config, kind).items() if name not in given}
+        values.update(from_file)
+        given |= set(from_file)
     if values["ray_address"] is not None and values["backend"] != "ray":
         raise UserError(f"--ray_address {values['ray_address']} needs --backend ray")
-    check_needs(values, given_flags(argv))
+    check_needs(values, given)
     seed = values["seed"] if values["seed"] is not None else secrets.randbelow(2**31)
     try:
         es = ESSettings(**{**pick(ESSettings, values), "popsize": population_size(values["popsize"])})
@@ -197,6 +199,9 @@ def experiment_values(path: str, kind: str) -> dict:
         sections = read_toml(path)
     except (OSError, ValueError) as error:
         raise UserError(f"--config {path}: {error}") from None
+    tables = [f"[{name}]" for name, section in sections.items() if name in SECTIONS and not isinstance(section, dict)]
+    if tables:
+        raise UserError(f"--config {path}: {', '.join(tables)} must be a table of settings")
     unknown = [f"[{name}]" for name in sections if name not in SECTIONS and name != "evaluation"]
     unknown += [f"{name}.{key}" for name, section in sections.items() if name in SECTIONS
                 for key in section if key not in field_names(SECTIONS[name])]
@@ -205,6 +210,13 @@ def experiment_values(path: str, kind: str) -> dict:
     if sections.get("policy", {}).get("kind", kind) != kind:
         found = sections["policy"]["kind"]
         raise UserError(f"--config {path} is a {found} experiment; run it with {TRAIN_SCRIPTS.get(found, 'its script')}")
+    for name, settings in SECTIONS.items():
+        hints = typing.get_type_hints(settings)
+        for key, value in sections.get(name, {}).items():
+            try:
+                check_type(key, value, hints[key])
+            except ValueError as error:
+                raise UserError(f"--config {path}: {name}.{error}") from None
     return {key: value for name in SECTIONS for key, value in sections.get(name, {}).items() if key != "env_ids"}
 
 

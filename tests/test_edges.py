@@ -361,3 +361,46 @@ def test_fitness_values_are_float32_and_dat_archives_are_named_after_their_file(
         assert f"{path.stem}/data.pkl" in names, (path.name, names)
     config = json.loads((finished_run / "config.json").read_text())
     assert config["run"]["threads"] == 1
+
+
+# --- an experiment file or a config.json goes around the flags' checks: the settings check themselves --------
+
+
+@pytest.mark.parametrize("toml, named", [
+    ("[es]\nsigma = 0", "--sigma must be a number > 0, got 0"),
+    ("[es]\nlr = \"0.1\"", "es.lr must be a number, got '0.1'"),
+    ("[es]\ndecay = 2.0", "--decay must be a number in (0, 1], got 2.0"),
+    ("[es]\nepisodes = 0", "--episodes must be a whole number >= 1, got 0"),
+    ("[es]\nnoise_size = 100", "--noise_size 100 is smaller than the 8832 parameters"),
+    ("[run]\nthreads = 0", "--threads must be -1 (all cores) or a whole number >= 1, got 0"),
+    ("[run]\nprint_every = 0", "--print_every must be a whole number >= 1, got 0"),
+    ("[policy]\nobs_norm = \"false\"", "policy.obs_norm must be true or false, got 'false'"),
+    ("[env]\nenvironment = 5", "env.environment must be a string, got 5"),
+    ("policy = 3", "[policy] must be a table of settings"),
+    ("[es]\nobs_norm_prob = 0.5", "--obs_norm_prob has an effect only with --obs_norm"),
+])
+def test_bad_experiment_file_values_are_one_line_and_create_nothing(tmp_path, toml, named):
+    (tmp_path / "bad.toml").write_text(toml + "\n")
+    flags = CARTPOLE[:-2]  # not --threads: the file's threads would not count
+    code, out, err = in_process(train_static.main, *flags, "--generations", "1", "--config", tmp_path / "bad.toml",
+                                "--folder", tmp_path / "runs")
+    one_error_line(code, err, named)
+    assert not (tmp_path / "runs").exists() or not any((tmp_path / "runs").iterdir())
+
+
+@pytest.mark.parametrize("edit, named", [
+    (lambda config: [], "config.json is not a JSON object"),
+    (lambda config: config | {"run": config["run"] | {"threads": 0}}, "--threads must be -1"),
+    (lambda config: config | {"es": config["es"] | {"sigma": "x"}}, "sigma must be a number, got 'x'"),
+])
+def test_a_config_json_edited_by_hand_is_refused_on_resume(finished_run, tmp_path, edit, named):
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    for path in finished_run.iterdir():
+        if path.is_file():
+            (run_dir / path.name).write_bytes(path.read_bytes())
+    (run_dir / "config.json").write_text(json.dumps(edit(json.loads((run_dir / "config.json").read_text()))))
+    before = {path.name: digest(path) for path in run_dir.iterdir()}
+    code, out, err = in_process(train_static.main, "--resume", run_dir, "--generations", "2")
+    one_error_line(code, err, named)
+    assert {path.name: digest(path) for path in run_dir.iterdir()} == before

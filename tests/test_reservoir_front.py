@@ -346,3 +346,18 @@ def test_the_comparison_runner_trains_evaluates_and_tabulates(tmp_path):
     code, output = run(compare.main, "--arms", "static", "static+evolved", "--seeds", "2", "--generations", "2",
                        "--popsize", "4", "--units", "5", "--episodes", "3", "--threads", "1", "--folder", tmp_path)
     assert code == 0 and (tmp_path / "results.md").read_text() == before and "evaluate_" not in output
+
+
+def test_reservoir_alone_on_evaluation_takes_the_rest_from_the_run_folder(trained, tmp_path):
+    run_dir, output = trained["hebbian, given reservoir"]
+    printed = shlex.split(output.strip().splitlines()[-1].split("evaluate with: ", 1)[1])[2:]
+    printed = printed[:printed.index("--episodes")]
+    returns = evaluated_returns(evaluate_hebb.main, *printed, json_path=tmp_path / "printed.json")
+    bare = [word for index, word in enumerate(printed) if not word.startswith("--reservoir_")
+            and not printed[index - 1].startswith("--reservoir_")]  # --reservoir, units, lr, sr and seed left out
+    assert "--reservoir" in bare
+    assert evaluated_returns(evaluate_hebb.main, *bare, json_path=tmp_path / "bare.json") == returns
+    evolved_dir, _ = trained["static, evolved reservoir"]
+    code, output = run(evaluate_static.main, "--environment", "CartPole-v1", "--path_weights", evolved_dir / "last.dat",
+                       "--reservoir")
+    assert code == 2 and "pass the run's evolved reservoir hyperparameters too, --path_reservoir" in output

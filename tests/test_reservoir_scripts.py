@@ -247,7 +247,25 @@ BAD_INPUT = {
                    "no journal optuna-journal_CartPole-v1_nothing_300k_steps.log in"),
     "not a bool": (("evolve_res", *CARTPOLE, "--nb_trials", "1", "--skip_c", "maybe"),
                    "argument --skip_c: expected true or false, got 'maybe'"),
+    "negative sampler seed": (("evolve_res", *CARTPOLE, "--nb_trials", "1", "--sampler_seed", "-1"),
+                              "argument --sampler_seed: must be a whole number from 0 to 2147483647, got -1"),
+    "seed too large": (("test", "--env_id", "CartPole-v1", "--h_test", "nothing", "--seed", "4294967296"),
+                       "argument --seed: must be a whole number from 0 to 2147483647"),
 }
+
+
+def test_a_corrupt_journal_is_named_and_left_as_it_was(evolved, tmp_path):
+    """A line that is not JSON, in the middle or last: refused before optuna reads or appends to it."""
+    extra()
+    journal = evolved[0] / CARTPOLE_JOURNAL
+    lines = journal.read_bytes().splitlines(keepends=True)
+    for corrupt in (b"".join(lines[:1] + [b"garbage{{\n"] + lines[1:]), b"".join(lines) + b"garbage{{\n"):
+        copy = tmp_path / journal.name
+        copy.write_bytes(corrupt)
+        for argv in (("evolve_res", *CARTPOLE, "--nb_trials", "1"), ("test", *CARTPOLE[:4], "--HP_training_steps", STEPS)):
+            code, out, err = run_in(tmp_path, *argv)
+            assert code == 2 and len(err.splitlines()) == 1 and f"the journal {journal.name} is corrupt" in err, err
+            assert copy.read_bytes() == corrupt
 
 
 @pytest.mark.parametrize("case", BAD_INPUT)
