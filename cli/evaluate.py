@@ -22,7 +22,7 @@ from cli.errors import USER_ERRORS, Parser, UserError, explained, say
 from cli.flags import RESERVOIR_FLAGS, SEED_RANGE, add_reservoir_flags, flag_value, positive_int, seed_value
 from cli.train import given_flags, resolve_environments
 from envs import ProblemSpec
-from envs.headless import RenderingUnavailable, check_can_render, choose_mujoco_gl
+from envs.headless import RenderingUnavailable, check_can_render, check_display, choose_mujoco_gl
 from es.observations import SavedStatistics, load_statistics, statistics_path
 from policies import PolicySettings
 from report.video import check_video_path
@@ -111,6 +111,7 @@ def show(report) -> None:
 def build_problem(spec: ProblemSpec, render_mode: str | None):
     """The environments and policy; rendering needs a GL backend that loads (``envs.headless``)."""
     if render_mode is not None:
+        check_display(render_mode)
         choose_mujoco_gl()
     with explained("cannot make the environments"):
         problem = spec.build(render_mode)

@@ -9,6 +9,7 @@ the fast, pixel-identical ``envs.car_racing.FastCarRacing`` (Gymnasium's own cla
 
 import os
 
+USER_VIDEO_DRIVER = os.environ.get("SDL_VIDEODRIVER")  # the user's choice, before the default below
 if not os.environ.get("DISPLAY"):
     os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 

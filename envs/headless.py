@@ -56,13 +56,34 @@ def is_mujoco(env: gym.Env) -> bool:
     return isinstance(env.unwrapped, MujocoEnv)
 
 
+NO_DISPLAY = ("--render shows a window, and there is no display (DISPLAY is not set); use --video PATH to record "
+              "the episode instead")
+
+
+def check_display(render_mode: str | None, environ=os.environ, platform: str = sys.platform) -> None:
+    """Refuse a window on a Linux machine without a display, before any environment is made (pyBullet's
+    GUI would wait for an X server forever); an SDL_VIDEODRIVER the user set (dummy, offscreen) is respected."""
+    from envs import USER_VIDEO_DRIVER
+
+    if render_mode == "human" and platform.startswith("linux") and not (
+            environ.get("DISPLAY") or environ.get("WAYLAND_DISPLAY") or USER_VIDEO_DRIVER):
+        raise RenderingUnavailable(NO_DISPLAY)
+
+
 def check_can_render(envs: list[gym.Env], render_mode: str | None, environ=os.environ) -> None:
-    """Refuse, before any episode runs, frames that no backend here can render."""
-    if render_mode is None or not any(is_mujoco(env) for env in envs):
+    """Refuse, before any episode runs, frames that an environment cannot make, or that no backend here
+    can render."""
+    if render_mode is None:
+        return
+    for env in envs:
+        modes = env.metadata.get("render_modes") or ()
+        if render_mode not in modes:
+            raise RenderingUnavailable(f"{env.spec.id if env.spec else type(env.unwrapped).__name__} cannot render "
+                                       f"{render_mode!r} frames (its render modes: {', '.join(modes) or 'none'})")
+    if not any(is_mujoco(env) for env in envs):
         return
     if render_mode == "human" and not environ.get("DISPLAY"):
-        raise RenderingUnavailable("--render shows a window, and there is no display (DISPLAY is not set); "
-                                   "use --video PATH to record the episode instead")
+        raise RenderingUnavailable(NO_DISPLAY)
     backend = environ.get("MUJOCO_GL")
     if render_mode == "rgb_array" and not environ.get("DISPLAY") and backend in (None, "", "glfw"):
         raise RenderingUnavailable(f"cannot render MuJoCo without a display: neither EGL nor OSMesa loads here; "

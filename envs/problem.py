@@ -51,13 +51,16 @@ class Problem:
         self.recipes: list[Recipe] = []
         import_recipe_modules(spec.recipe_modules)
         for env_id in spec.env_ids:
-            env, recipe = make_env(env_id, render_mode, preprocessing(spec.policy), spec.max_episode_steps)
+            env, recipe = self._make(env_id, render_mode)
             self.envs.append(env)
             self.recipes.append(recipe)
         self.net = network_spec(self.envs[0], self.recipes[0])
         for env_id, env, recipe in zip(spec.env_ids, self.envs, self.recipes):
             self._check_compatible(env_id, network_spec(env, recipe), recipe)
         self.policy = make_policy(spec.policy, self.net, self.recipes[0].normalise_hebbian)
+
+    def _make(self, env_id: str, render_mode: str | None = None) -> tuple[gym.Env, Recipe]:
+        return make_env(env_id, render_mode, preprocessing(self.spec.policy), self.spec.max_episode_steps)
 
     def _check_compatible(self, env_id: str, net: NetworkSpec, recipe: Recipe) -> None:
         first = self.spec.env_ids[0]
@@ -85,8 +88,7 @@ class Problem:
             self.envs[env_index].close()
         except Exception:  # the env is already broken; a failing close must not hide the retry
             pass
-        self.envs[env_index], _ = make_env(self.spec.env_ids[env_index], preprocessing=preprocessing(self.spec.policy),
-                                           max_episode_steps=self.spec.max_episode_steps)
+        self.envs[env_index], _ = self._make(self.spec.env_ids[env_index])
 
     def close(self) -> None:
         for env in self.envs:

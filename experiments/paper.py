@@ -27,10 +27,12 @@ import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))  # the project's modules, when run as a script
+
+from cli.hints import EVALUATE_SCRIPTS, TRAIN_SCRIPTS  # noqa: E402
+
 FILES = ROOT / "experiments" / "paper"
 EXPERIMENTS = sorted({path.stem.split("_")[0] for path in FILES.glob("*.toml")})
-TRAIN_SCRIPTS = {"static": "train_static.py", "hebbian": "train_hebb.py"}
-EVALUATE_SCRIPTS = {"static": "evaluate_static.py", "hebbian": "evaluate_hebb.py"}
 
 
 def parse(argv: list[str] | None) -> argparse.Namespace:
@@ -71,7 +73,7 @@ def evaluate_command(args: argparse.Namespace, experiment: dict, run_dir: Path) 
     """The final weights (last*.dat) on every body; statistics to JSON, one episode to a PNG."""
     evaluation, policy = experiment["evaluation"], experiment["policy"]
     command = [sys.executable, str(ROOT / EVALUATE_SCRIPTS[args.kind]), "--environment", evaluation["environment"],
-               "--episodes", str(args.episodes or evaluation["episodes"]), "--seed", "0",
+               "--episodes", str(args.episodes if args.episodes is not None else evaluation["episodes"]), "--seed", "0",
                "--json", str(run_dir / "evaluation.json"), "--plot", str(run_dir / "adaptation.png")]
     if args.kind == "static":
         return command + ["--path_weights", str(run_dir / "last.dat")]

@@ -61,6 +61,7 @@ class HebbianPolicy:
             raise ValueError(f"unknown --distribution {distribution!r}; valid values: {', '.join(DISTRIBUTIONS)}")
         net.check_cnn_input()
         self.net = net
+        self._sizes = net.head_sizes  # the kernel's layer sizes, once, not per step
         self.distribution = distribution
         self.rule = get_rule(rule)
         self.init_weights = init_weights
@@ -116,7 +117,7 @@ class HebbianPolicy:
         if state.features is not None:
             obs = state.features(obs)
         hebbian_forward_update(state.weights, state.folded, state.scale, obs, state.work,
-                               *self.net.head_sizes, self.net.squash_out, self.normalise)
+                               *self._sizes, self.net.squash_out, self.normalise)
         return state.out, state
 
     # --- files in the original shapes --------------------------------------------------------

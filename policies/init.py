@@ -20,6 +20,15 @@ def default_bound(fan_in: int) -> float:
     return 1.0 / math.sqrt(fan_in)
 
 
+def default_init(layout, rng: np.random.Generator, fan_in: dict[str, int]) -> np.ndarray:
+    """PyTorch's default initialisation of a whole parameter vector: every part of ``layout``
+    U(+-1/sqrt(fan_in)), with ``fan_in`` per part (Linear and Conv2d: the layer's inputs, biases alike;
+    LSTMCell: its hidden size)."""
+    blocks = [rng.uniform(-default_bound(fan_in[name]), default_bound(fan_in[name]), part.size)
+              for name, part in layout.parts.items()]
+    return np.concatenate(blocks).astype(np.float32)
+
+
 def _uniform(bound_of: Callable[[int, int], float]) -> Sampler:
     def sample(rng: np.random.Generator, shape: tuple[int, int]) -> np.ndarray:
         n_out, n_in = shape

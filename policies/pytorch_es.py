@@ -24,12 +24,12 @@ output, which is the argmax of the output: the environments' ``ArgmaxAction``.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
 
+from policies.init import default_init
 from policies.network import Layout, NetworkSpec
 from policies.static import WeightFile
 
@@ -40,16 +40,6 @@ CONV_CHANNELS = 32
 CONV_LAYERS = 4
 LSTM_HIDDEN = 256
 SHORT_PATCH = 32  # conv patches shorter than this (the first layer's 9) are laid out position-major
-
-
-def default_init(layout: Layout, rng: np.random.Generator, fan_in: dict[str, int]) -> np.ndarray:
-    """PyTorch's default initialisation: every part U(+-1/sqrt(fan_in)), with ``fan_in`` per part
-    (Linear and Conv2d: the layer's inputs, biases alike; LSTMCell: its hidden size)."""
-    blocks = []
-    for name, part in layout.parts.items():
-        bound = 1.0 / math.sqrt(fan_in[name])
-        blocks.append(rng.uniform(-bound, bound, part.size))
-    return np.concatenate(blocks).astype(np.float32)
 
 
 # --- the small net -------------------------------------------------------------------------------
@@ -224,10 +214,6 @@ class LSTMState:
     cell: np.ndarray
     gates: np.ndarray
     out: np.ndarray
-
-    @property
-    def hidden(self) -> np.ndarray:
-        return self.inputs[-self.cell.size:]
 
 
 class ConvLSTMPolicy(WeightFile):

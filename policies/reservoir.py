@@ -158,13 +158,9 @@ class ReservoirFrontEnd:
                  evolve: bool = False):
         from reservoirs.esn import ReservoirMatrices  # reservoirpy: the caller has checked it is installed
 
-        check_settings(units, values, evolve, seed)
-        self.head, self.input_dim, self.units, self.values, self.seed, self.evolve = \
-            head, input_dim, units, values, seed, evolve
+        self.head, self.units, self.values, self.evolve = head, units, values, evolve  # checked by PolicySettings
         self.net = head.net  # the network the evolved weights define (the adaptation plot's layers)
         self.matrices = ReservoirMatrices.generate(units, input_dim, seed)
-        self._recurrent = self.matrices.recurrent
-        self._inputs = self.matrices.input_signs
         self._bias = self.matrices.bias.toarray().ravel()
         parts = [(name, part.shape) for name, part in head.layout.parts.items()]
         self.layout = Layout(parts + ([(ROLE, (len(BOUNDS),))] if evolve else []))
@@ -192,14 +188,15 @@ class ReservoirFrontEnd:
 
     def reset(self, params: np.ndarray, rng: np.random.Generator) -> ReservoirState:
         values = self.hyperparameters(params)
-        recurrent = self._recurrent.data * self.matrices.recurrent_factor(values.spectral_radius)
-        inputs = self._inputs.data * values.input_scaling
+        recurrent = self.matrices.recurrent.data * self.matrices.recurrent_factor(values.spectral_radius)
+        inputs = self.matrices.input_signs.data * values.input_scaling
         return ReservoirState(self.head.reset(params[self._head], rng), values.leak_rate, recurrent, inputs,
                               np.zeros(self.units), np.zeros(self.units), np.zeros(self.units, dtype=np.float32))
 
     def act(self, params: np.ndarray, state: ReservoirState, obs: np.ndarray):
-        reservoir_step(state.recurrent, self._recurrent.indices, self._recurrent.indptr, state.inputs,
-                       self._inputs.indices, self._inputs.indptr, self._bias, state.leak_rate, obs, state.state,
+        matrices = self.matrices
+        reservoir_step(state.recurrent, matrices.recurrent.indices, matrices.recurrent.indptr, state.inputs,
+                       matrices.input_signs.indices, matrices.input_signs.indptr, self._bias, state.leak_rate, obs, state.state,
                        state.pre, state.features)
         output, state.head = self.head.act(params[self._head], state.head, state.features)
         return output, state

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from policies.conv import ConvFeatures
-from policies.init import default_bound
+from policies.init import default_init
 from policies.kernels import static_forward
 from policies.network import Layout, NetworkSpec, to_kernel_layout
 
@@ -76,11 +76,8 @@ class StaticPolicy(WeightFile):
 
     def initial_params(self, rng: np.random.Generator) -> np.ndarray:
         """PyTorch's default initialisation, U(+-1/sqrt(fan_in)) per layer, as the original."""
-        blocks = []
-        for part in self.layout.parts.values():
-            bound = default_bound(int(np.prod(part.shape[1:])))
-            blocks.append(rng.uniform(-bound, bound, part.size))
-        return np.concatenate(blocks).astype(np.float32)
+        fan_in = {name: int(np.prod(part.shape[1:])) for name, part in self.layout.parts.items()}
+        return default_init(self.layout, rng, fan_in)
 
     def reset(self, params: np.ndarray, rng: np.random.Generator | None = None) -> StaticState:
         work, out = head_buffers(self.net)

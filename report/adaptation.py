@@ -8,11 +8,13 @@ so no display is ever needed.
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import numpy as np
 
 from envs.evaluation import Trace
+from es import files
 
 
 def plot_adaptation(trace: Trace, path: str | Path) -> None:
@@ -45,4 +47,6 @@ def plot_adaptation(trace: Trace, path: str | Path) -> None:
         axes[1].legend(loc="best")
     axes[-1].set_xlabel("policy step")
     axes[-1].xaxis.set_major_locator(MaxNLocator(integer=True))
-    figure.savefig(str(path), dpi=100, format="png")
+    buffer = io.BytesIO()
+    figure.savefig(buffer, dpi=100, format="png")
+    files.atomic_write_bytes(Path(path), buffer.getvalue())

@@ -45,12 +45,10 @@ class VideoRecorder(gym.Wrapper):
 
     def step(self, action):
         result = self.env.step(action)
+        self._capture()
         if result[2] or result[3]:
-            self._capture()
             self._recording = False
             self.finish()
-        else:
-            self._capture()
         return result
 
     def _capture(self) -> None:

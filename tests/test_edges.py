@@ -404,3 +404,20 @@ def test_a_config_json_edited_by_hand_is_refused_on_resume(finished_run, tmp_pat
     code, out, err = in_process(train_static.main, "--resume", run_dir, "--generations", "2")
     one_error_line(code, err, named)
     assert {path.name: digest(path) for path in run_dir.iterdir()} == before
+
+
+def test_render_without_a_display_is_refused_before_any_environment_is_made(tmp_path, weights):
+    environ = {key: value for key, value in os.environ.items()
+               if key not in ("DISPLAY", "WAYLAND_DISPLAY", "SDL_VIDEODRIVER")}
+    result = subprocess.run([sys.executable, "evaluate_static.py", "--environment", "CartPole-v1", "--path_weights",
+                             str(weights), "--render"], cwd=ROOT, env=environ, capture_output=True, text=True,
+                            timeout=120)
+    one_error_line(result.returncode, result.stderr, "--render shows a window, and there is no display")
+
+
+def test_video_of_an_environment_that_renders_nothing_is_refused_before_the_episodes(tmp_path):
+    save_dat(tmp_path / "w.dat", np.zeros(2 * 128 + 128 * 64 + 64 * 2))
+    code, out, err = in_process(evaluate_static.main, "--environment", "tests.custom_env_module:TestCorridor-v0",
+                                "--path_weights", tmp_path / "w.dat", "--video", tmp_path / "c.mp4")
+    one_error_line(code, err, "TestCorridor-v0 cannot render 'rgb_array' frames (its render modes: none)")
+    assert not (tmp_path / "c.mp4").exists() and "episode" not in out

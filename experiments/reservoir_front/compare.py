@@ -27,13 +27,19 @@ from __future__ import annotations
 
 import argparse
 import json
-import shlex
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent.parent
+sys.path.insert(0, str(ROOT))  # the project's modules, when run as a script
+
+import envs  # noqa: E402
+from cli.flags import positive_int, seed_value, threads_value  # noqa: E402
+from cli.hints import EVALUATE_FLAGS, EVALUATE_SCRIPTS, TRAIN_SCRIPTS  # noqa: E402
+from es.runfolder import named_file  # noqa: E402
+from experiments.paper import latest_run, run  # noqa: E402
+
 DEFAULT_ENV = "experiments.reservoir_front.partial:CartPoleNoVelocity-v1"
 # the reservoir ER-MRL evolved for PPO on CartPole without velocities (README, "Evolved reservoirs (ER-MRL)":
 # trial 7, sr 1.00, lr 0.34), given as it is to the ES arms
@@ -47,12 +53,6 @@ ARMS = {
     "hebbian+reservoir": ("hebbian", GIVEN),
     "hebbian+evolved": ("hebbian", EVOLVED),
 }
-TRAIN = {"static": "train_static.py", "hebbian": "train_hebb.py"}
-EVALUATE = {"static": "evaluate_static.py", "hebbian": "evaluate_hebb.py"}
-# the files of a run's final parameters, and the evaluate scripts' flags for them
-LAST_FILES = (("last.dat", "--path_weights"), ("last_coeffs.dat", "--path_hebb"),
-              ("last_CNN_parameters.dat", "--path_coev"), ("last_coevolved_initial_weights.dat", "--path_coev"),
-              ("last_reservoir.dat", "--path_reservoir"))
 
 
 def parse(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
@@ -65,54 +65,60 @@ def parse(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
     parser.add_argument("--evaluate_on", default=None, help="evaluation environment(s); default: --environment")
     parser.add_argument("--arms", nargs="+", choices=list(ARMS), default=list(ARMS), metavar="ARM",
                         help=f"which arms, of {', '.join(ARMS)}")
-    parser.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3], metavar="SEED")
-    parser.add_argument("--generations", type=int, default=100)
-    parser.add_argument("--popsize", type=int, default=64)
-    parser.add_argument("--units", type=int, default=20, help="the reservoir's units (--reservoir_units)")
-    parser.add_argument("--episodes", type=int, default=100, help="evaluation episodes per environment")
-    parser.add_argument("--threads", type=int, default=-1)
+    parser.add_argument("--seeds", nargs="+", type=seed_value, default=[1, 2, 3], metavar="SEED")
+    parser.add_argument("--generations", type=positive_int, default=100)
+    parser.add_argument("--popsize", type=positive_int, default=64)
+    parser.add_argument("--units", type=positive_int, default=20, help="the reservoir's units (--reservoir_units)")
+    parser.add_argument("--episodes", type=positive_int, default=100, help="evaluation episodes per environment")
+    parser.add_argument("--threads", type=threads_value, default=-1)
     parser.add_argument("--folder", type=Path, default=ROOT / "runs" / "reservoir_front")
     parser.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
     args = parser.parse_args(argv)
     args.folder = args.folder.resolve()  # the scripts run in the repository root
+    for flag, ids in (("--environment", args.environment), ("--evaluate_on", args.evaluate_on or "")):
+        try:  # before hours of training, not at the first evaluation
+            [envs.resolve_env_id(env_id.strip(), notify=lambda line: None) for env_id in ids.split(",") if env_id.strip()]
+        except envs.EnvironmentError_ as error:
+            parser.error(f"{flag}: {error}")
     return args, extra
 
 
-def the_run(folder: Path) -> Path | None:
-    runs = sorted(path.parent for path in folder.glob("*/checkpoint.npz"))  # names start with the time
-    return runs[-1] if runs else None
-
-
 def train_command(args: argparse.Namespace, extra: list[str], arm: str, seed: int, folder: Path) -> list[str]:
+    """The arm's training; an unfinished run resumes (--generations the total), and the training script
+    refuses any other flag that differs from the run's."""
     kind, flags = ARMS[arm]
-    command = [sys.executable, str(ROOT / TRAIN[kind])]
-    previous = the_run(folder)
-    if previous is not None:  # resume: --generations is the total
-        return command + ["--resume", str(previous), "--generations", str(args.generations)]
+    previous = latest_run(folder)
     reservoir = ["--reservoir_units", str(args.units)] if flags else []
-    return command + ["--environment", args.environment, "--seed", str(seed), "--generations", str(args.generations),
-                      "--popsize", str(args.popsize), "--threads", str(args.threads), "--folder", str(folder),
-                      *flags, *reservoir, *extra]
+    return [sys.executable, str(ROOT / TRAIN_SCRIPTS[kind]), *(["--resume", str(previous)] if previous else []),
+            "--environment", args.environment, "--seed", str(seed), "--generations", str(args.generations),
+            "--popsize", str(args.popsize), "--threads", str(args.threads), "--folder", str(folder),
+            *flags, *reservoir, *extra]
 
 
 def evaluate_command(args: argparse.Namespace, arm: str, run_dir: Path) -> list[str]:
     """The run's last*.dat files; the evaluate scripts take the rule and the reservoir from its config.json."""
     kind = ARMS[arm][0]
-    command = [sys.executable, str(ROOT / EVALUATE[kind]), "--environment", args.evaluate_on or args.environment,
+    command = [sys.executable, str(ROOT / EVALUATE_SCRIPTS[kind]), "--environment", args.evaluate_on or args.environment,
                "--episodes", str(args.episodes), "--seed", "0", "--json", str(run_dir / "evaluation.json")]
     if kind == "hebbian":
         policy = json.loads((run_dir / "config.json").read_text())["policy"]
         command += ["--hebb_rule", policy["hebb_rule"], "--init_weights", policy["init_weights"]]
-    return command + [word for name, flag in LAST_FILES if (run_dir / name).exists()
-                      for word in (flag, str(run_dir / name))]
+    files = [(flag, run_dir / named_file("last", role)) for role, flag in EVALUATE_FLAGS.items()]
+    return command + [word for flag, path in files if path.exists() for word in (flag, str(path))]
 
 
-def run(command: list[str], dry_run: bool) -> None:
-    print("$ " + shlex.join(command), flush=True)
-    if not dry_run:
-        code = subprocess.run(command, cwd=ROOT).returncode
-        if code:
-            sys.exit(code)
+def evaluated(run_dir: Path, command: list[str]) -> bool:
+    """Whether evaluation.json is this evaluation of the run's latest parameters."""
+    evaluation = run_dir / "evaluation.json"
+    if not evaluation.exists() or evaluation.stat().st_mtime < (run_dir / "checkpoint.npz").stat().st_mtime:
+        return False
+    return json.loads(evaluation.read_text())["command"][1:] == command[2:]
+
+
+def succeeded(command: list[str], dry_run: bool) -> None:
+    code = run(command, dry_run)
+    if code:
+        sys.exit(code)
 
 
 def table(results: dict[str, dict[int, dict]], seeds: list[int]) -> str:
@@ -142,15 +148,18 @@ def main(argv: list[str] | None = None) -> int:
         for seed in args.seeds:
             folder = args.folder / f"{arm}_seed{seed}"
             started = time.perf_counter()
-            run(train_command(args, extra, arm, seed, folder), args.dry_run)
-            run_dir = the_run(folder) or folder / "<run folder>"
-            evaluation = run_dir / "evaluation.json"
-            if args.dry_run or not evaluation.exists():
-                run(evaluate_command(args, arm, run_dir) if not args.dry_run else
-                    [EVALUATE[ARMS[arm][0]], "…", "--json", str(evaluation)], args.dry_run)
-            if not args.dry_run:
-                results.setdefault(arm, {})[seed] = json.loads(evaluation.read_text())
-                print(f"# {arm}, seed {seed}: {time.perf_counter() - started:.0f} s", flush=True)
+            succeeded(train_command(args, extra, arm, seed, folder), args.dry_run)
+            run_dir = latest_run(folder)
+            if run_dir is None:  # a dry run
+                print(f"# then the evaluation of {folder}/<run folder>/last*.dat", flush=True)
+                continue
+            command = evaluate_command(args, arm, run_dir)
+            if not evaluated(run_dir, command):
+                succeeded(command, args.dry_run)
+            if args.dry_run:
+                continue
+            results.setdefault(arm, {})[seed] = json.loads((run_dir / "evaluation.json").read_text())
+            print(f"# {arm}, seed {seed}: {time.perf_counter() - started:.0f} s", flush=True)
     if args.dry_run:
         return 0
     text = table(results, args.seeds)
