@@ -12,7 +12,6 @@ import os
 import secrets
 import sys
 import typing
-from dataclasses import fields
 from pathlib import Path
 
 import envs
@@ -221,7 +220,7 @@ def experiment_values(path: str, kind: str) -> dict:
 
 
 def pick(settings: type, values: dict) -> dict:
-    names = {item.name for item in fields(settings)}
+    names = field_names(settings)
     return {name: value for name, value in values.items() if name in names}
 
 
