@@ -118,6 +118,14 @@ def test_killed_actors_are_replaced_and_their_tasks_rerun(ray_session, generatio
         if len(done) == 3:  # mid-generation: one actor is busy, the other just reported
             for actor in first_actors:
                 ray_session.kill(actor)
+            for actor in first_actors:  # ray.kill returns before the actor is dead: no task may reach it after
+                while True:
+                    try:
+                        ray_session.get(actor.ready.remote(), timeout=30)
+                    except ray_session.exceptions.RayActorError:
+                        break
+                    except ray_session.exceptions.GetTimeoutError:
+                        continue
 
     try:
         results = evaluator.evaluate(generation["work"], kill_all_after_three)
