@@ -1,35 +1,21 @@
 #!/usr/bin/env python
 """Evaluate static weights evolved by train_static.py (or by the original code).
 
-    python evaluate_static.py --environment CarRacing-v0 --path_weights weights.dat
-    python evaluate_static.py --environment CartPole-v1 --path_weights run/best.dat --episodes 10
+    python evaluate_static.py --path_weights run/last.dat --episodes 10       # as the run recorded it
+    python evaluate_static.py --environment CarRacing-v0 --path_weights weights.dat   # the original's files
 """
 
 import sys
 
 from cli import evaluate_main, evaluation_parser
-from cli.flags import add_network_flag
-from es.files import load_dat
 
 
 def build_parser():
-    parser = evaluation_parser("evaluate_static.py", __doc__.splitlines()[0])
-    parser.add_argument("--path_weights", required=True, metavar="FILE",
-                        help="the .dat file of evolved weights")
-    add_network_flag(parser)
-    return parser
-
-
-def load_arrays(args) -> dict:
-    return {"weights": load_dat(args.path_weights)}
-
-
-def input_paths(args) -> list[str]:
-    return [args.path_weights]
+    return evaluation_parser("evaluate_static.py", __doc__.splitlines()[0], "static")
 
 
 def main(argv=None) -> int:
-    return evaluate_main("static", build_parser(), argv, load_arrays, input_paths)
+    return evaluate_main("static", build_parser(), argv)
 
 
 if __name__ == "__main__":

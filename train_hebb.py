@@ -10,22 +10,11 @@ The weights start random every episode and change at every step by the evolved r
 
 import sys
 
-from cli import DISTRIBUTIONS, INIT_CHOICES, RULES, train_main, training_parser
-from cli.flags import add_reservoir_flags
+from cli import train_main, training_parser
 
 
 def build_parser():
-    parser = training_parser("train_hebb.py", __doc__.splitlines()[0], folder="heb_coeffs")
-    parser.add_argument("--hebb_rule", default="ABCD_lr", choices=list(RULES), metavar="RULE",
-                        help=f"Hebbian rule: {', '.join(RULES)}")
-    parser.add_argument("--init_weights", default="uni", choices=list(INIT_CHOICES), metavar="INIT",
-                        help=f"initial weights of every episode: {', '.join(INIT_CHOICES)} "
-                             "(coevolve: evolved with the rules)")
-    parser.add_argument("--distribution", default="normal", choices=list(DISTRIBUTIONS), metavar="DIST",
-                        help="generation-0 coefficients (and CNN / co-evolved weights): normal N(0,1) "
-                             "or uniform U(-1,1)")
-    add_reservoir_flags(parser)
-    return parser
+    return training_parser("train_hebb.py", __doc__.splitlines()[0], "hebbian", folder="heb_coeffs")
 
 
 def main(argv=None) -> int:

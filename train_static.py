@@ -10,14 +10,10 @@
 import sys
 
 from cli import train_main, training_parser
-from cli.flags import add_network_flag, add_reservoir_flags
 
 
 def build_parser():
-    parser = training_parser("train_static.py", __doc__.splitlines()[0], folder="weights")
-    add_network_flag(parser)
-    add_reservoir_flags(parser)
-    return parser
+    return training_parser("train_static.py", __doc__.splitlines()[0], "static", folder="weights")
 
 
 def main(argv=None) -> int:

@@ -1,24 +1,45 @@
-"""A training run's configuration: the four settings of ``es``, ``policies`` and ``envs``, joined.
+"""A run's configuration: the four settings of ``es``, ``policies`` and ``envs``, joined, and read from
+what a user hands in (config.json, an experiment file) with every key checked against its declaration
+(``settings``).
 
 ``config.json`` is its serialisation (one object per section), and an experiment file is the same
-sections in TOML (``experiments/*.toml``): both are read by ``TrainConfig.from_dict``, so a resumed
-run and an experiment are configured by the one loader. config.json files of earlier versions (one
-flat object) are read too.
+sections in TOML (``experiments/*.toml``). A setting that does not apply to the run's policy kind is
+not recorded (no ``hebb_rule`` for a static run), and refused when given. config.json files of earlier
+versions are read too: one flat object, or sections that recorded every setting whatever the kind
+(those hold the defaults, and are dropped). Resume and evaluation start from the recorded settings and
+apply the flags given (``overlay``): a flag that contradicts the recording is refused, naming both values.
 """
 
 from __future__ import annotations
 
 import tomllib
-import types
-import typing
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from envs import EnvSettings
 from es.settings import ESSettings, RunSettings
 from policies import PolicySettings
+from settings import Option, contradictions, options, type_problem
 
 SECTIONS = {"es": ESSettings, "policy": PolicySettings, "env": EnvSettings, "run": RunSettings}
+TRAIN_SCRIPTS = {"static": "train_static.py", "hebbian": "train_hebb.py"}
+
+
+def declared() -> list[Option]:
+    """Every declared setting, section by section."""
+    return [item for settings in SECTIONS.values() for item in options(settings)]
+
+
+def section_of(name: str) -> str:
+    return next(section for section, settings in SECTIONS.items() if name in {item.name for item in options(settings)})
+
+
+class Contradiction(ValueError):
+    """Flags given that differ from what a run recorded; ``differing``: '--lr 0.9 (the run has 0.2)', ..."""
+
+    def __init__(self, differing: list[str]):
+        super().__init__(", ".join(differing))
+        self.differing = differing
 
 
 @dataclass(frozen=True)
@@ -29,80 +50,92 @@ class TrainConfig:
     run: RunSettings
 
     def to_dict(self) -> dict:
-        return {name: asdict(getattr(self, name)) for name in SECTIONS}
+        """The sections, without the settings that do not apply to this policy kind."""
+        kind = self.policy.kind
+        return {name: {key: value for key, value in asdict(getattr(self, name)).items()
+                       if next(item for item in options(settings) if item.name == key).applies_to(kind)}
+                for name, settings in SECTIONS.items()}
 
     @classmethod
-    def from_dict(cls, data: dict) -> "TrainConfig":
-        """The sections of ``data``; keys a section does not know are ignored (they are information:
-        versions, the command, the layout). A flat object (config.json before sections) is read too."""
+    def from_dict(cls, data: dict, source: str = "config.json") -> "TrainConfig":
+        """A run's config.json: every section, every key known; keys outside the sections are information
+        (versions, the command, the layout). A flat object (config.json before sections) is read as it was."""
         if "es" not in data and "kind" in data:
-            data = {name: data for name in SECTIONS}
-        return cls(**{name: section(data.get(name, {}), settings) for name, settings in SECTIONS.items()})
+            known = {item.name for item in declared()}
+            return cls.from_values({key: value for key, value in data.items() if key in known}, source)
+        missing = [name for name in SECTIONS if not isinstance(data.get(name), dict)]
+        if missing:
+            raise ValueError(f"{source} has no {', '.join(repr(name) for name in missing)} section; a run's "
+                             f"config.json holds the sections {', '.join(SECTIONS)}")
+        return cls.from_values(section_values(data, source, recorded=True), source)
+
+    @classmethod
+    def from_values(cls, values: dict, source: str) -> "TrainConfig":
+        """The settings from flat values (``{"lr": 0.2, ...}``); each value's type is checked, then the settings
+        check their values."""
+        for item in declared():
+            if item.name in values and (problem := type_problem(item, values[item.name])) is not None:
+                raise ValueError(f"{source}: {problem}")
+        return cls(**{name: settings(**{item.name: values[item.name] for item in options(settings)
+                                        if item.name in values}) for name, settings in SECTIONS.items()})
 
     @classmethod
     def from_toml(cls, path: str | Path) -> "TrainConfig":
-        return cls.from_dict(read_toml(path))
+        sections = read_toml(path)
+        kind = sections.get("policy", {}).get("kind", "static")
+        return cls.from_values(section_values(sections, f"--config {path}", kind=kind), f"--config {path}")
 
     def with_values(self, **values) -> "TrainConfig":
         """A copy with the named fields changed, wherever they live (``lr=0.1, threads=2``)."""
-        changed = {}
-        for name, settings in SECTIONS.items():
-            mine = {key: value for key, value in values.items() if key in field_names(settings)}
-            changed[name] = replace(getattr(self, name), **mine) if mine else getattr(self, name)
-        unknown = set(values) - {key for settings in SECTIONS.values() for key in field_names(settings)}
+        unknown = set(values) - {item.name for item in declared()}
         if unknown:
             raise ValueError(f"unknown settings: {', '.join(sorted(unknown))}")
+        changed = {}
+        for name, settings in SECTIONS.items():
+            mine = {key: value for key, value in values.items() if key in {item.name for item in options(settings)}}
+            changed[name] = replace(getattr(self, name), **mine) if mine else getattr(self, name)
         return TrainConfig(**changed)
 
     def value(self, name: str):
         """A field by name, whichever section holds it."""
-        for section_name, settings in SECTIONS.items():
-            if name in field_names(settings):
-                return getattr(getattr(self, section_name), name)
-        raise KeyError(name)
+        return getattr(getattr(self, section_of(name)), name)
+
+    def overlay(self, given: dict, changeable) -> "TrainConfig":
+        """These settings with the ``given`` values of those in ``changeable``; every other given value must
+        be what these settings hold already (a ``Contradiction`` lists those that are not). Resume (only the
+        resumable settings change) and evaluation (the policy is the run's) both start from a run this way."""
+        fixed = {name: value for name, value in given.items() if name not in changeable}
+        differing = contradictions({name: self.value(name) for name in fixed}, fixed, declared())
+        if differing:
+            raise Contradiction(differing)
+        return self.with_values(**{name: value for name, value in given.items() if name in changeable})
 
 
-def field_names(settings: type) -> set[str]:
-    return {item.name for item in fields(settings)}
-
-
-def section(values: dict, settings: type):
-    """A settings dataclass from a dict: known fields only, each of its field's type (``check_type``),
-    lists back to tuples where the field is one."""
-    hints = typing.get_type_hints(settings)
-    known = {}
-    for name in field_names(settings):
-        if name in values:
-            value = values[name]
-            check_type(name, value, hints[name])
-            if isinstance(value, list) and typing.get_origin(hints[name]) is tuple:
-                value = tuple(value)
-            known[name] = value
-    return settings(**known)
-
-
-TYPE_NAMES = {bool: "true or false", int: "a whole number", float: "a number", str: "a string", type(None): "none"}
-
-
-def _matches(value, hint) -> bool:
-    if typing.get_origin(hint) in (typing.Union, types.UnionType):
-        return any(_matches(value, option) for option in typing.get_args(hint))
-    if typing.get_origin(hint) is tuple:
-        return isinstance(value, (list, tuple))
-    if hint is float:
-        return isinstance(value, (int, float)) and not isinstance(value, bool)
-    if hint is int:
-        return isinstance(value, int) and not isinstance(value, bool)
-    return isinstance(value, hint)
-
-
-def check_type(name: str, value, hint) -> None:
-    """Refuse a value of another type than its setting's (an experiment file or config.json can hold
-    anything: ``reservoir = "false"`` would otherwise be true)."""
-    if not _matches(value, hint):
-        options = typing.get_args(hint) if typing.get_origin(hint) in (typing.Union, types.UnionType) else (hint,)
-        expected = " or ".join(TYPE_NAMES.get(option, "a list") for option in options)
-        raise ValueError(f"{name} must be {expected}, got {value!r}")
+def section_values(sections: dict, source: str, kind: str | None = None, recorded: bool = False) -> dict:
+    """The flat settings of sectioned data (a config.json when ``recorded``, else an experiment file), every key
+    checked: unknown keys and keys that do not apply to the policy kind are refused with their names; a
+    config.json of an earlier version, which recorded every setting, may hold those at their defaults."""
+    kind = kind or sections.get("policy", {}).get("kind", "static")
+    flat, unknown, foreign = {}, [], []
+    for name, settings in SECTIONS.items():
+        entries = sections.get(name, {})
+        if not isinstance(entries, dict):
+            raise ValueError(f"{source}: [{name}] must be a table of settings")
+        known = {item.name: item for item in options(settings)}
+        for key, value in entries.items():
+            item = known.get(key)
+            if item is None or (item.spec.derived and not recorded):
+                unknown.append(f"{name}.{key}")
+            elif not item.applies_to(kind):
+                if not recorded or value != item.default:
+                    foreign.append(f"{name}.{key} ({item.label}, for {' and '.join(item.spec.applies)} runs)")
+            else:
+                flat[key] = value
+    if unknown:
+        raise ValueError(f"{source}: unknown settings {', '.join(unknown)}")
+    if foreign:
+        raise ValueError(f"{source}: {', '.join(foreign)} does not apply to a {kind} run")
+    return flat
 
 
 def read_toml(path: str | Path) -> dict:

@@ -2,40 +2,67 @@
 
 One evaluation function (``envs.evaluation.evaluate``) runs the episodes through the training's own
 rollout; the outputs the user asks for (``--json``, ``--plot``, ``--video``) are checked before any
-episode runs. Weights trained with ``--obs_norm`` are evaluated with the observation statistics
-saved beside them (``<name>.obs_norm.npz``, ``es.observations``), found automatically; weights in
-a run folder whose config.json says ``obs_norm`` but without that file are refused. Weights trained with
-``--reservoir`` are evaluated with the reservoir the flags describe, or, without ``--reservoir``, the one
-the run folder's config.json records (``policies.reservoir``); evolved reservoir hyperparameters come
-from ``--path_reservoir``.
+episode runs.
+
+A weight file in a run folder (or the folder itself: its ``last`` files) is evaluated as the run
+recorded it: every setting that shapes the policy (declared ``evaluation``: rule, init, network,
+normalisation, reservoir) and the environment come from its config.json (``TrainConfig.overlay``, as a
+resume does); a flag that contradicts the recording is refused naming both values, and ``--environment``
+may name others (a body the run did not train on). The run's other files of the same ``best``/``last``
+prefix (the CNN, co-evolved initial weights, evolved reservoir hyperparameters) are found beside the
+file; observation statistics (``<name>.obs_norm.npz``, ``es.observations``) too. The original program's
+``.dat`` files, outside a run folder, are evaluated with the flags given, as the original did.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 from pathlib import Path
 
+from dataclasses import replace
+
+import numpy as np
+
+from cli.config import Contradiction, TrainConfig, declared
 from cli.errors import USER_ERRORS, Parser, UserError, explained, say
-from cli.flags import RESERVOIR_FLAGS, SEED_RANGE, add_reservoir_flags, flag_value, positive_int, seed_value
-from cli.train import given_flags, resolve_environments
+from cli.hints import EVALUATE_FLAGS, EVALUATE_SCRIPTS, MAIN_ROLE
+from cli.flags import add_settings, defaults, flag_value, given, positive_int, seed_value
+from cli.train import resolve_environments
 from envs import ProblemSpec
 from envs.headless import RenderingUnavailable, check_can_render, check_display, choose_mujoco_gl
+from es.files import read_json
 from es.observations import SavedStatistics, load_statistics, statistics_path
-from policies import PolicySettings
+from es.runfolder import named_file
 from report.video import check_video_path
+from settings import SEED_RANGE, unmet_requirement
 
 
-def evaluation_parser(prog: str, description: str) -> Parser:
-    parser = Parser(prog=prog, description=description,
-                    formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+COEV_ROLES = (  # --path_coev's
+    "coevolved_initial_weights", "CNN_parameters")
+FROM_RUN = "; with a file of a run folder, what its config.json records"
+
+
+def evaluation_parser(prog: str, description: str, kind: str) -> Parser:
+    """The flags of an evaluate script: its files, its episodes and outputs, and the settings declared
+    for evaluating a ``kind`` (``cli.flags``)."""
+    parser = Parser(prog=prog, description=description)
     add = parser.add_argument
-    add("--environment", default="CarRacing-v0", metavar="ID",
-        help="environment id; several ids separated by commas give one row each")
-    add("--episodes", type=positive_int, default=1, metavar="N", help="episodes per environment")
-    add("--seed", type=seed_value, default=0, help="seed of the first episode; episode i uses seed + i")
+    main = EVALUATE_FLAGS[MAIN_ROLE[kind]]
+    if kind == "static":
+        add(main, required=True, metavar="FILE", help="the .dat file of evolved weights, or a run folder (its last.dat)")
+    else:
+        add(main, required=True, metavar="FILE",
+            help="the .dat file of Hebbian coefficients, or a run folder (its last_coeffs.dat)")
+        add("--path_coev", default=None, metavar="FILE",
+            help="the .dat file of CNN weights (pixel environments) or of co-evolved initial weights (default: in a "
+                 "run folder, the one beside the coefficients)")
+    add("--path_reservoir", default=None, metavar="FILE",
+        help="the evolved reservoir hyperparameters of a --reservoir_evolve run (default: in a run folder, "
+             "best_reservoir.dat or last_reservoir.dat beside the weights)")
+    add("--episodes", type=positive_int, default=1, metavar="N", help="episodes per environment (default: 1)")
+    add("--seed", type=seed_value, default=0, help="seed of the first episode; episode i uses seed + i (default: 0)")
     add("--render", type=flag_value, nargs="?", const=True, default=False, metavar="BOOL",
         help="show the episodes in a window (needs a display)")
     add("--video", default=None, metavar="PATH",
@@ -46,8 +73,15 @@ def evaluation_parser(prog: str, description: str) -> Parser:
     add("--plot", default=None, metavar="PATH",
         help="PNG of one episode (first environment, first seed): reward per step, or for ants the "
              "distance walked, and for Hebbian networks the norm of each layer's weights over time")
-    add_reservoir_flags(parser, evaluation=True)
+    parser.set_defaults(kind=kind)
+    add_settings(parser, "evaluate", kind, evaluation_note=FROM_RUN)
     return parser
+
+
+def path_flags(args: argparse.Namespace) -> dict[str, str]:
+    """flag -> path of the weight files given."""
+    flags = ("--path_weights", "--path_hebb", "--path_coev", "--path_reservoir")
+    return {flag: getattr(args, flag[2:]) for flag in flags if getattr(args, flag[2:], None) is not None}
 
 
 def check_outputs(args: argparse.Namespace, inputs: list[str]) -> None:
@@ -133,40 +167,74 @@ def saved_statistics(weight_file: Path) -> SavedStatistics | None:
     return statistics
 
 
-def trained_policy(weight_file: Path) -> dict:
-    """The policy settings of the run folder ``weight_file`` lies in (its config.json); {} elsewhere."""
+def main_file(kind: str, given: str) -> Path:
+    """The file the script reads first: the one given, or in a run folder given as such its ``last`` file."""
+    path = Path(given)
+    return path / named_file("last", MAIN_ROLE[kind]) if (path / "config.json").is_file() else path
+
+
+def recorded_config(kind: str, weight_file: Path) -> TrainConfig | None:
+    """The settings of the run folder ``weight_file`` lies in (its config.json); None outside a run folder."""
+    path = weight_file.parent / "config.json"
+    if not path.is_file():
+        return None
     try:
-        policy = json.loads((weight_file.parent / "config.json").read_text())["policy"]
-    except (OSError, ValueError, KeyError, TypeError):  # not in a run folder, or one from before sections
-        return {}
-    return policy if isinstance(policy, dict) else {}
+        config = TrainConfig.from_dict(read_json(path), str(path))
+    except (ValueError, TypeError) as error:
+        raise UserError(f"{path}: unreadable ({error})") from None
+    if config.policy.kind != kind:
+        raise UserError(f"{weight_file} is from a {config.policy.kind} run ({path}); evaluate it with "
+                        f"{EVALUATE_SCRIPTS[config.policy.kind]}")
+    return config
 
 
-def trained_with_obs_norm(weight_file: Path) -> bool:
-    """Whether the run folder ``weight_file`` lies in (its config.json) normalised observations."""
-    return bool(trained_policy(weight_file).get("obs_norm", False))
+def evaluation_config(kind: str, args: argparse.Namespace, weight_file: Path,
+                      statistics: SavedStatistics | None) -> TrainConfig:
+    """What to evaluate with: the run's recorded settings (or outside a run, the defaults), then the flags given;
+    a flag that contradicts the recording is refused, naming both values. --environment may differ."""
+    flags = given(args)
+    recorded = recorded_config(kind, weight_file)
+    base = recorded or TrainConfig.from_values(defaults(kind), "flags")
+    values = {**{item.name: base.value(item.name) for item in declared()}, **flags}
+    if recorded is None and args.path_reservoir is not None:  # the original's files: evolved if given
+        flags["reservoir_evolve"] = values["reservoir_evolve"] = True
+    unmet = unmet_requirement(declared(), values, flags)
+    if unmet is not None:
+        raise UserError(unmet)
+    try:
+        config = base.overlay(flags, {"environment"} if recorded else set(flags))
+    except Contradiction as error:
+        raise UserError(f"{error}: {weight_file} is a file of the run {weight_file.parent}, whose config.json records "
+                        "these; leave the flags out, or give the run's values") from None
+    except ValueError as error:
+        raise UserError(str(error)) from None
+    if recorded is not None:
+        say(f"settings: as {weight_file.parent / 'config.json'} records them")
+    obs_norm = statistics is not None or config.policy.obs_norm
+    clip = statistics.clip if statistics is not None else config.policy.obs_clip
+    return replace(config, policy=replace(config.policy, obs_norm=obs_norm, obs_clip=clip if obs_norm else None))
 
 
-def reservoir_options(args: argparse.Namespace, argv: list[str], weight_file: Path) -> dict:
-    """The reservoir settings to evaluate with: with ``--reservoir``, the flags given, and for the others the
-    run folder's config.json (if it records a reservoir), else the flags' defaults; without it, the run
-    folder's reservoir, if any; else none."""
-    given = sorted(given_flags(argv) & {*RESERVOIR_FLAGS, "path_reservoir"})
-    trained = trained_policy(weight_file)
-    stored = trained if trained.get("reservoir") else {}
-    if args.reservoir:
-        options = {name: getattr(args, name) if name in given else stored.get(name, getattr(args, name))
-                   for name in RESERVOIR_FLAGS}
-        evolved = args.path_reservoir is not None or bool(stored.get("reservoir_evolve"))
-        return dict(reservoir=True, reservoir_evolve=evolved, **options)
-    extra = [name for name in given if name != "path_reservoir" or not stored.get("reservoir_evolve")]
-    if extra:
-        raise UserError(f"--{extra[0]} has an effect only with --reservoir (or, for --path_reservoir, weights of a "
-                        f"--reservoir_evolve run); add --reservoir or leave --{extra[0]} out")
-    if not stored:
-        return {}
-    say(f"reservoir: as {weight_file.parent / 'config.json'} records it")
-    return {name: stored[name] for name in ("reservoir", "reservoir_evolve", *RESERVOIR_FLAGS) if name in stored}
+def weight_arrays(args: argparse.Namespace, weight_file: Path, first: np.ndarray, policy, settings) -> dict:
+    """role -> array: the files given, each refused if this policy has no such file, and the run's others
+    of the same prefix beside ``weight_file`` (``best_reservoir.dat`` beside ``best.dat``)."""
+    from es.files import load_dat
+
+    coev = COEV_ROLES[0] if settings.init_weights == "coevolve" else COEV_ROLES[1]
+    paths = {}
+    for flag, path in path_flags(args).items():
+        role = coev if flag == "--path_coev" else next(role for role, name in EVALUATE_FLAGS.items() if name == flag)
+        if role not in policy.roles:
+            raise UserError(f"{flag} {path}: this policy has no such file (its files: "
+                            f"{', '.join(EVALUATE_FLAGS[role] for role in policy.roles)}); leave {flag} out")
+        paths[role] = Path(path)
+    prefix = next((prefix for prefix in ("best", "last") if weight_file.name == named_file(prefix, policy.roles[0])),
+                  None)
+    for role in policy.roles:
+        beside = weight_file.parent / named_file(prefix, role) if prefix else None
+        if role not in paths and beside is not None and beside.is_file():
+            paths[role] = beside
+    return {role: first if role == policy.roles[0] else load_dat(path) for role, path in paths.items()}
 
 
 def describe_reservoir(problem, params) -> None:
@@ -189,9 +257,8 @@ def normalise_observations(problem, weight_file: Path, statistics: SavedStatisti
         problem.policy.observe((statistics.mean, statistics.std))
 
 
-def evaluate_main(kind: str, parser: Parser, argv: list[str] | None, load_arrays, input_paths) -> int:
-    """Shared body of the evaluate scripts; ``load_arrays(args)`` reads the weight files, whose paths
-    ``input_paths(args)`` lists (the first is the one observation statistics are looked for beside)."""
+def evaluate_main(kind: str, parser: Parser, argv: list[str] | None = None) -> int:
+    """Shared body of the evaluate scripts."""
     from envs.evaluation import EpisodeError, evaluate, format_table
     from es.files import load_dat
     from report.video import record_first_episode
@@ -206,27 +273,24 @@ def evaluate_main(kind: str, parser: Parser, argv: list[str] | None, load_arrays
         show(report)
 
     try:
-        env_ids = resolve_environments(args.environment)
-        check_outputs(args, input_paths(args) + ([args.path_reservoir] if args.path_reservoir else []))
+        weight_file = main_file(kind, getattr(args, EVALUATE_FLAGS[MAIN_ROLE[kind]][2:]))
+        check_outputs(args, [str(weight_file), *(path for flag, path in path_flags(args).items()
+                                                 if flag != EVALUATE_FLAGS[MAIN_ROLE[kind]])])
         if args.seed + args.episodes - 1 > SEED_RANGE[1]:
             raise UserError(f"--seed {args.seed} with --episodes {args.episodes} runs past the largest episode seed "
                             f"{SEED_RANGE[1]}")
         if args.render and args.video:
             raise UserError("--video records frames off screen; it cannot be combined with --render")
-        arrays = load_arrays(args)
-        if args.path_reservoir is not None:
-            arrays["reservoir"] = load_dat(args.path_reservoir)
-        weight_file = Path(input_paths(args)[0])
+        first = load_dat(weight_file)
         with explained("cannot load the observation statistics"):
             statistics = saved_statistics(weight_file)
-        options = {name: getattr(args, name) for name in ("hebb_rule", "init_weights", "network") if hasattr(args, name)}
-        with explained("bad reservoir settings"):
-            policy = PolicySettings(kind, **options, obs_clip=statistics.clip if statistics else None,
-                                    obs_norm=statistics is not None or trained_with_obs_norm(weight_file),
-                                    **reservoir_options(args, argv, weight_file))
+        config = evaluation_config(kind, args, weight_file, statistics)
+        env_ids = resolve_environments(config.env.environment)
         render_mode = "human" if args.render else ("rgb_array" if args.video else None)
-        problem = build_problem(ProblemSpec(env_ids, policy), render_mode)
+        with explained("bad reservoir settings"):
+            problem = build_problem(ProblemSpec(env_ids, config.policy), render_mode)
         normalise_observations(problem, weight_file, statistics)
+        arrays = weight_arrays(args, weight_file, first, problem.policy, config.policy)
         with explained("cannot load the weights"):
             params = problem.policy.load(arrays)
         describe_reservoir(problem, params)

@@ -1,4 +1,11 @@
-"""Flag value types shared by the four scripts: each refuses a bad value in one line that names it."""
+"""The scripts' flags, made from the settings' declarations (``settings.setting``), and the value types of
+the flags that are not settings (evaluation's outputs, the ER-MRL scripts).
+
+``add_settings`` adds a script's setting flags: each once, with its help and its default said once. A
+setting flag's default is ``argparse.SUPPRESS``, so that the parsed namespace holds exactly the settings
+the user gave (``given``): a new run lays them over an experiment file and the defaults, a resume and an
+evaluation over what the run recorded. ``flag_table`` gives the rows of the docs' flag tables.
+"""
 
 from __future__ import annotations
 
@@ -6,7 +13,87 @@ import argparse
 
 import numpy as np
 
-from cli.errors import say
+from cli.config import SECTIONS, declared
+from es.settings import original_threads as threads_value  # the ER-MRL and experiment scripts' too
+from settings import SEED_RANGE, Option, options
+
+
+def converter(item: Option):
+    """The argparse type of a setting's flag: its declared ``parse``, else its field's type."""
+    if item.spec.parse is not None:
+        return item.spec.parse
+    base = item.base_type()
+    return base if base in (int, float) else None
+
+
+def help_text(item: Option, default=None) -> str:
+    """The help, with the default said once (flags that are off by default say nothing more)."""
+    shown = item.spec.shown_default or (default if default is not None else item.default)
+    text = item.spec.help
+    if item.choices is not None and item.spec.metavar:  # argparse lists them only without a metavar
+        text = f"{text}: {', '.join(map(str, item.choices))}"
+    if item.base_type() is bool or shown is None:
+        return text
+    return f"{text} (default: {shown})"
+
+
+HELP_ORDER = ("env", "es", "run", "policy")  # --help as the original's: the environment first
+
+
+def script_options(script: str, kind: str) -> list[Option]:
+    """The settings whose flags ``script`` ("train" or "evaluate") has for a policy ``kind``."""
+    ordered = [item for section in HELP_ORDER for item in options(SECTIONS[section])]
+    return [item for item in ordered if item.flag and script in item.spec.scripts and item.applies_to(kind)]
+
+
+def add_settings(parser: argparse.ArgumentParser, script: str, kind: str, defaults: dict | None = None,
+                 evaluation_note: str = "") -> None:
+    """The setting flags of ``script`` for ``kind``; ``defaults``: a script's own default of a setting (the
+    training folder), ``evaluation_note``: what the evaluate scripts' help adds (their values come from the run)."""
+    groups: dict[str | None, argparse._ActionsContainer] = {None: parser}
+    parser.set_defaults(setting_flags=tuple(item.name for item in script_options(script, kind)))
+    for item in script_options(script, kind):
+        group = item.spec.group
+        if group not in groups:
+            groups[group] = parser.add_argument_group(group)
+        add = groups[group].add_argument
+        text = help_text(item, (defaults or {}).get(item.name))
+        if evaluation_note and item.spec.evaluation:
+            text = f"{text}{evaluation_note}"
+        common = dict(dest=item.name, default=argparse.SUPPRESS, help=text)
+        if item.base_type() is bool and item.spec.parse is None:
+            add(f"--{item.flag}", action="store_true", **common)
+        else:
+            add(f"--{item.flag}", type=converter(item), choices=item.choices, metavar=item.spec.metavar, **common)
+        for alias, value in item.spec.aliases.items():
+            add(f"--{alias}", dest=item.name, action="store_const", const=value, default=argparse.SUPPRESS,
+                help=f"the same as --{item.flag} {value}")
+
+
+def given(args: argparse.Namespace) -> dict:
+    """The settings the command line gave (their flags' defaults are suppressed; the script's other flags, such
+    as the evaluate scripts' --episodes, are not settings)."""
+    return {name: value for name, value in vars(args).items() if name in args.setting_flags}
+
+
+def defaults(kind: str, overrides: dict | None = None) -> dict:
+    """Every setting's default for a policy ``kind`` (a script's own defaults laid over)."""
+    values = {item.name: item.default for settings in SECTIONS.values() for item in options(settings)}
+    return {**values, "kind": kind, **(overrides or {})}
+
+
+def flag_table(parser: argparse.ArgumentParser) -> list[tuple[str, str, str]]:
+    """(flags, default, help) for each flag of a parser, in --help's order: the docs' flag tables."""
+    rows = []
+    for action in parser._actions:
+        if not action.option_strings or action.help == argparse.SUPPRESS:
+            continue
+        default = "" if action.default in (None, False, argparse.SUPPRESS) else str(action.default)
+        rows.append((", ".join(action.option_strings), default, action.help or ""))
+    return rows
+
+
+# --- value types of the flags that are not settings ----------------------------------------------------
 
 
 def positive_int(text: str) -> int:
@@ -20,27 +107,6 @@ def positive_float(text: str) -> float:
     value = float(text)
     if not value > 0 or not np.isfinite(value):
         raise argparse.ArgumentTypeError(f"must be a number > 0, got {text}")
-    return value
-
-
-SEED_RANGE = (0, 2**31 - 1)
-
-
-def threads_value(text: str) -> int:
-    """-1: all cores; N >= 1 workers. The original ran 0 and -2 (any value <= 1 but -1) serially,
-    so its command lines keep working: they mean 1, with a notice."""
-    value = int(text)
-    if value == 0 or value < -1:
-        say(f"note: --threads {value} runs everything in this process, as the original did; that is --threads 1")
-        return 1
-    return value
-
-
-def fraction(text: str) -> float:
-    """A number in (0, 1]."""
-    value = float(text)
-    if not 0 < value <= 1:
-        raise argparse.ArgumentTypeError(f"must be a number in (0, 1], got {text}")
     return value
 
 
@@ -70,52 +136,5 @@ def flag_value(text: str | None) -> bool:
     raise argparse.ArgumentTypeError(f"expected true or false, got {text!r}")
 
 
-def add_network_flag(parser: argparse.ArgumentParser) -> None:
-    """``--network`` of the static scripts: the original's network, or one of pytorch-es's."""
-    from policies import NETWORKS
-
-    parser.add_argument("--network", choices=tuple(NETWORKS), default="default",
-                        help="default: the original's MLP (state vectors) or CNN (images); small: pytorch-es's "
-                             "64-64 selu MLP (state vectors); lstm: pytorch-es's conv-LSTM on its 42x42 "
-                             "normalised frames (images)")
-
-
-RESERVOIR_FLAGS = ("reservoir_units", "reservoir_lr", "reservoir_sr", "reservoir_iss", "reservoir_seed")
-
-
-def add_reservoir_flags(parser: argparse.ArgumentParser, evaluation: bool = False) -> None:
-    """``--reservoir`` and its settings (``policies.reservoir``); values are checked by ``PolicySettings``.
-
-    Training has ``--reservoir_evolve``; evaluation reads evolved hyperparameters from ``--path_reservoir``,
-    and takes the whole reservoir from the run folder's config.json when ``--reservoir`` is not given."""
-    from policies import PolicySettings
-    from policies.reservoir import BOUNDS
-
-    group = parser.add_argument_group("reservoir front end (ER-MRL's echo state network before the network)")
-    add = group.add_argument
-    add("--reservoir", action="store_true",
-        help="the network reads the state of a random reservoir (ER-MRL's leaky echo state network, reset every "
-             "episode) that reads the observation; not for pixels; needs reservoirpy "
-             "(pip install -r requirements-reservoirs.txt)"
-             + ("; default: as the run folder's config.json says" if evaluation else ""))
-    add("--reservoir_units", type=int, default=PolicySettings.reservoir_units, metavar="N",
-        help="its neurons (ER-MRL's --units)")
-    add("--reservoir_lr", type=float, default=PolicySettings.reservoir_lr, metavar="LR",
-        help="its leak rate, in (0, 1]" + ("" if evaluation else "; with --reservoir_evolve where evolution starts"))
-    add("--reservoir_sr", type=float, default=PolicySettings.reservoir_sr, metavar="SR",
-        help="the spectral radius of its recurrent weights")
-    add("--reservoir_iss", type=float, default=PolicySettings.reservoir_iss, metavar="ISS",
-        help="the scaling of its input weights")
-    if evaluation:
-        add("--reservoir_seed", type=seed_value, default=None,
-            help="the seed its matrices were drawn with: the training run's (its config.json's reservoir_seed)")
-        add("--path_reservoir", default=None, metavar="FILE",
-            help="the evolved reservoir hyperparameters of a --reservoir_evolve run (best_reservoir.dat, "
-                 "last_reservoir.dat)")
-    else:
-        add("--reservoir_seed", type=seed_value, default=None,
-            help="the seed of its random matrices (default: the run's --seed)")
-        add("--reservoir_evolve", action="store_true",
-            help="evolve its leak rate, spectral radius and input scaling with the network: three more parameters, "
-                 "log-scale within ER-MRL's bounds "
-                 + ", ".join(f"{name} [{low:g}, {high:g}]" for name, (low, high) in BOUNDS.items()))
+__all__ = ["add_settings", "defaults", "flag_table", "flag_value", "given", "non_empty", "positive_float",
+           "positive_int", "script_options", "seed_value", "threads_value"]

@@ -1,9 +1,10 @@
 """The commands the scripts print for the user to run next: resume a run, evaluate its parameters.
 
-A printed command must work when pasted into the same shell: it names the interpreter that is
-running (``sys.executable``, so it works outside an activated virtual environment too) and the
-script by a path that resolves from the current folder, and every word is shell-quoted (a
-``--folder "my runs"`` stays one word).
+A printed command must work when pasted into any shell, in any folder: it names the interpreter that
+is running (``sys.executable``, so it works outside an activated virtual environment too) and the
+script by its absolute path, and every word is shell-quoted (a ``--folder "my runs"`` stays one word).
+The evaluate command is short: the weight file alone, since the evaluate scripts take the rest from
+the run folder's config.json and the files beside it (``cli.evaluate``).
 """
 
 from __future__ import annotations
@@ -12,55 +13,33 @@ import shlex
 import sys
 from pathlib import Path
 
-from cli.config import TrainConfig
-
+from cli.config import TRAIN_SCRIPTS, TrainConfig
 ROOT = Path(__file__).resolve().parent.parent
-TRAIN_SCRIPTS = {"static": "train_static.py", "hebbian": "train_hebb.py"}
+
 EVALUATE_SCRIPTS = {"static": "evaluate_static.py", "hebbian": "evaluate_hebb.py"}
-# role of a policy's exported array -> the evaluate scripts' flag for its file
+# the evaluate scripts' flag of each file role a policy exports (``Policy.roles``)
 EVALUATE_FLAGS = {"weights": "--path_weights", "coeffs": "--path_hebb", "CNN_parameters": "--path_coev",
                   "coevolved_initial_weights": "--path_coev", "reservoir": "--path_reservoir"}
+MAIN_ROLE = {"static": "weights", "hebbian": "coeffs"}  # the file an evaluate script is given, and looks beside
+
+__all__ = ["EVALUATE_FLAGS", "EVALUATE_SCRIPTS", "TRAIN_SCRIPTS", "command", "evaluate_hint", "resume_hint",
+           "script_path"]
 
 
 def script_path(name: str) -> str:
-    """The project's script ``name``, relative to the current folder if it lies below it."""
-    path = ROOT / name
-    try:
-        return str(path.relative_to(Path.cwd()))
-    except ValueError:
-        return str(path)
+    """The project's script ``name``, by its absolute path."""
+    return str(ROOT / name)
 
 
 def command(script: str, *words: object) -> str:
-    return shlex.join([sys.executable or "python", script_path(script),
-                       *map(str, words)])
+    return shlex.join([sys.executable or "python", script_path(script), *map(str, words)])
 
 
 def resume_hint(config: TrainConfig, run_dir: Path) -> str:
     return command(TRAIN_SCRIPTS[config.policy.kind], "--resume", run_dir)
 
 
-def evaluate_hint(config: TrainConfig, paths: dict[str, Path]) -> str:
-    """The command that evaluates the parameter files ``paths`` (role -> file) over 10 episodes."""
-    words: list[object] = ["--environment", config.env.environment]
-    if config.policy.kind == "hebbian":
-        words += ["--hebb_rule", config.policy.hebb_rule, "--init_weights", config.policy.init_weights]
-    if config.policy.network != "default":
-        words += ["--network", config.policy.network]
-    words += reservoir_words(config)
-    for role, path in paths.items():
-        words += [EVALUATE_FLAGS[role], path]
-    return command(EVALUATE_SCRIPTS[config.policy.kind], *words, "--episodes", 10)
-
-
-def reservoir_words(config: TrainConfig) -> list[object]:
-    """The reservoir flags of the evaluate scripts, for a run with ``--reservoir`` (evolved hyperparameters
-    come from their file instead)."""
-    policy = config.policy
-    if not policy.reservoir:
-        return []
-    words: list[object] = ["--reservoir", "--reservoir_units", policy.reservoir_units]
-    if not policy.reservoir_evolve:
-        words += ["--reservoir_lr", policy.reservoir_lr, "--reservoir_sr", policy.reservoir_sr,
-                  "--reservoir_iss", policy.reservoir_iss]
-    return words + ["--reservoir_seed", policy.reservoir_seed]
+def evaluate_hint(config: TrainConfig, weight_file: Path) -> str:
+    """The command that evaluates a run's weight file (the rest comes from its folder) over 10 episodes."""
+    kind = config.policy.kind
+    return command(EVALUATE_SCRIPTS[kind], EVALUATE_FLAGS[MAIN_ROLE[kind]], weight_file, "--episodes", 10)

@@ -1,8 +1,9 @@
 """``train_static.py`` and ``train_hebb.py``: their flags, the run's configuration, start and resume.
 
-The flags keep the original names and defaults (upstream spec §1); new ones use the same snake_case
-style. A new run's settings come from the flags (over an experiment file given with ``--config``);
-a resumed run's from its config.json, where only what changes no result may be given again.
+The flags are the settings' declarations (``settings``, ``cli.flags``): the original's names and defaults
+(upstream spec §1), and new ones in the same snake_case style. A new run's settings come from the flags,
+over an experiment file given with ``--config``, over the defaults; a resumed run's from its config.json,
+where only the settings declared resumable may be given other values (``TrainConfig.overlay``).
 """
 
 from __future__ import annotations
@@ -11,128 +12,39 @@ import argparse
 import os
 import secrets
 import sys
-import typing
+from dataclasses import replace
 from pathlib import Path
 
 import envs
-from cli.config import SECTIONS, TrainConfig, check_type, field_names, read_toml
+
+from cli.config import SECTIONS, TRAIN_SCRIPTS, Contradiction, TrainConfig, declared, read_toml, section_values
 from cli.errors import USER_ERRORS, Parser, UserError, explained, say
-from cli.flags import RESERVOIR_FLAGS, fraction, non_empty, positive_float, positive_int, seed_value, threads_value
-from cli.hints import TRAIN_SCRIPTS, evaluate_hint, resume_hint
-from envs import EnvSettings, ProblemSpec
-from es.backends import BACKENDS
+from cli.flags import add_settings, defaults, given, non_empty
+from cli.hints import evaluate_hint, resume_hint
+from envs import ProblemSpec
 from es.loop import NonFiniteUpdate, Status, Trainer
-from es.optimizers import OPTIMIZERS
 from es.runfolder import RunFolder, SaveError
-from es.settings import RESUMABLE, ESSettings, RunSettings
-from es.shaping import SHAPINGS
-from policies import PolicySettings
+from es.settings import ESSettings
 from report import tensorboard
 from report.log import FitnessPlot, GenerationLog
 from report.progress import display_for
+from settings import unmet_requirement
 
 EXIT_CODES = {Status.DONE: 0, Status.FAILED: 1, Status.INTERRUPTED: 130}
 
 
-def training_parser(prog: str, description: str, folder: str) -> Parser:
-    parser = Parser(prog=prog, description=description, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    add = parser.add_argument
-    add("--environment", default="CarRacing-v0", metavar="ID",
-        help="Gymnasium, pyBullet or MuJoCo id, or module:Id for a custom environment; several ids "
-             "separated by commas are trained together (fitness = mean over them)")
-    add("--popsize", type=int, default=200, metavar="N", help="population size (even: mirrored pairs)")
-    add("--print_every", type=positive_int, default=1, metavar="K", help="save files every K generations")
-    add("--lr", type=positive_float, default=0.2, help="ES learning rate")
-    add("--decay", type=fraction, default=0.995, help="learning-rate decay per generation, in (0, 1]")
-    add("--sigma", type=positive_float, default=0.1, help="initial noise standard deviation")
-    add("--generations", type=positive_int, default=300, metavar="G",
-        help="number of generations (with --resume: the total, counting those already run)")
-    add("--folder", type=non_empty, default=folder, metavar="DIR", help="where run folders are created")
-    add("--threads", type=threads_value, default=-1, metavar="W",
-        help="worker processes; -1 = all cores, 1 = run in this process (0 and other negative values too, as "
-             "the original)")
-    add("--seed", type=seed_value, default=None, help="seed of the run (default: a random one, printed and saved)")
-    add("--episodes", type=positive_int, default=1, metavar="E",
-        help="episodes per fitness evaluation (the fitness is their mean)")
-    add("--resume", type=non_empty, default=None, metavar="RUN_DIR", help="continue the run saved in RUN_DIR")
-    add("--config", type=non_empty, default=None, metavar="FILE",
-        help="an experiment file (TOML, as experiments/paper/*.toml) giving the settings; flags given too "
-             "override it")
-    add("--backend", choices=BACKENDS, default="process",
-        help="parallel backend for --threads > 1: a process pool on this machine, or Ray (one machine "
-             "or a cluster; pip install -r requirements-ray.txt)")
-    add("--ray_address", default=None, metavar="ADDRESS",
-        help="with --backend ray: 'auto' joins the cluster `ray start` runs on this machine, HOST:PORT "
-             "another one; default: start a local Ray with --threads CPUs")
-    add_modern_options(parser)
+def training_parser(prog: str, description: str, kind: str, folder: str) -> Parser:
+    """The flags of a training script: every setting declared for training a ``kind`` (``cli.flags``), and
+    --resume and --config; ``folder``: the script's default --folder (the original's)."""
+    parser = Parser(prog=prog, description=description)
+    parser.add_argument("--resume", type=non_empty, default=None, metavar="RUN_DIR",
+                        help="continue the run saved in RUN_DIR")
+    parser.add_argument("--config", type=non_empty, default=None, metavar="FILE",
+                        help="an experiment file (TOML, as experiments/paper/*.toml) giving the settings; flags "
+                             "given too override it")
+    parser.set_defaults(kind=kind, default_folder=folder)
+    add_settings(parser, "train", kind, defaults={"folder": folder})
     return parser
-
-
-def add_modern_options(parser: Parser) -> None:
-    """Options beyond the 2020 algorithm (OpenAI's es-starter, pytorch-es); their defaults are the
-    original's. Values are checked by the settings (``es.settings``), in one line naming the flag."""
-    group = parser.add_argument_group("beyond the original algorithm (defaults: the original)")
-    add = group.add_argument
-    add("--shaping", choices=list(SHAPINGS), default=ESSettings.shaping,
-        help="fitness shaping: rank_std (the original: centered ranks, standardised), rank (OpenAI's centered "
-             "ranks), none (the fitness, standardised), nes (pytorch-es's NES utilities)")
-    add("--optimizer", choices=list(OPTIMIZERS), default=ESSettings.optimizer,
-        help="sgd (the original), adam or momentum (OpenAI's; gradient sum F*eps / N); --lr is the step size")
-    add("--useAdam", dest="optimizer", action="store_const", const="adam",
-        help="pytorch-es's flag: the same as --optimizer adam")
-    add("--beta1", type=float, default=ESSettings.beta1, help="with --optimizer adam, in [0, 1)")
-    add("--beta2", type=float, default=ESSettings.beta2, help="with --optimizer adam, in [0, 1)")
-    add("--momentum", type=float, default=ESSettings.momentum, help="with --optimizer momentum, in [0, 1)")
-    add("--l2coeff", type=float, default=ESSettings.l2coeff, metavar="C",
-        help="weight decay in the gradient, g <- g - C * theta (OpenAI's l2coeff)")
-    add("--fitness_l2", type=float, default=ESSettings.fitness_l2, metavar="C",
-        help="the original's L2 penalty in the fitness: return - C * mean(theta_m^2)")
-    add("--obs_norm", action="store_true",
-        help="normalise observations by running statistics (OpenAI's RunningStat); not for pixels")
-    add("--obs_clip", type=float, default=None, metavar="C",
-        help="with --obs_norm: clip normalised observations to +-C (OpenAI: 5); default no clip")
-    add("--obs_norm_prob", type=float, default=ESSettings.obs_norm_prob, metavar="P",
-        help="with --obs_norm: the fraction of mirrored pairs whose observations update the statistics, in (0, 1]")
-    add("--eval_every", type=int, default=None, metavar="G",
-        help="every G generations the centre also runs --eval_episodes episodes on seeds of their own; "
-             "their mean picks best.dat")
-    add("--eval_episodes", type=int, default=ESSettings.eval_episodes, metavar="K",
-        help="with --eval_every: the centre's evaluation episodes")
-    add("--max_episode_steps", type=int, default=None, metavar="N",
-        help="end an episode (as truncated) after N policy steps; default the environment's own limit")
-    add("--variable_ep_len", action="store_true",
-        help="pytorch-es's adaptive episode length: each generation's episodes end after twice the mean length "
-             "of the last generation's perturbed episodes")
-    add("--tensorboard", action="store_true",
-        help=f"also write every metrics column as TensorBoard scalars in <run>/tensorboard ({tensorboard.INSTALL_HINT})")
-
-
-# flag -> (what it needs, whether the values have it): given alone, the flag would silently do nothing
-NEEDS = {
-    "beta1": ("--optimizer adam", lambda values: values["optimizer"] == "adam"),
-    "beta2": ("--optimizer adam", lambda values: values["optimizer"] == "adam"),
-    "momentum": ("--optimizer momentum", lambda values: values["optimizer"] == "momentum"),
-    "obs_clip": ("--obs_norm", lambda values: values["obs_norm"]),
-    "obs_norm_prob": ("--obs_norm", lambda values: values["obs_norm"]),
-    "eval_episodes": ("--eval_every", lambda values: values["eval_every"] is not None),
-    **{name: ("--reservoir", lambda values: values["reservoir"]) for name in (*RESERVOIR_FLAGS, "reservoir_evolve")},
-}
-
-
-def check_needs(values: dict, given: set[str]) -> None:
-    for name in sorted(given & set(NEEDS)):
-        needed, present = NEEDS[name]
-        if not present(values):
-            raise UserError(f"--{name} has an effect only with {needed}; add {needed} or leave --{name} out")
-
-
-ALIASES = {"useAdam": "optimizer"}  # another program's flag -> the setting it gives
-
-
-def given_flags(argv: list[str]) -> set[str]:
-    """The settings the command line gives (``--lr 0.1`` and ``--lr=0.1`` alike; aliases by their setting)."""
-    names = {item[2:].split("=")[0] for item in argv if item.startswith("--")}
-    return {ALIASES.get(name, name) for name in names}
 
 
 def resolve_environments(text: str) -> tuple[str, ...]:
@@ -166,92 +78,72 @@ def check_population_fits(es: ESSettings, n_envs: int) -> None:
                         f"{memory / 2**30:.1f} GiB; give --popsize {largest} or less")
 
 
-def config_from_args(kind: str, args: argparse.Namespace, argv: list[str]) -> TrainConfig:
-    """The flags' values, over those of the experiment file ``--config`` names, if any."""
-    values = {name: value for name, value in vars(args).items() if name not in ("resume", "config")}
-    given = given_flags(argv)
-    if args.config is not None:
-        from_file = {name: value for name, value in experiment_values(args.config, kind).items() if name not in given}
-        values.update(from_file)
-        given |= set(from_file)
-    if values["ray_address"] is not None and values["backend"] != "ray":
-        raise UserError(f"--ray_address {values['ray_address']} needs --backend ray")
-    check_needs(values, given)
-    seed = values["seed"] if values["seed"] is not None else secrets.randbelow(2**31)
+def config_from_args(kind: str, args: argparse.Namespace) -> TrainConfig:
+    """The flags given, over those of the experiment file ``--config`` names, if any, over the defaults."""
+    flags = given(args)
+    from_file = experiment_values(args.config, kind) if args.config is not None else {}
+    values = {**defaults(kind, {"folder": args.default_folder}), **from_file, **flags}
+    unmet = unmet_requirement(declared(), values, {*from_file, *flags})
+    if unmet is not None:
+        raise UserError(unmet)
+    seed = values["seed"] if "seed" in {*from_file, *flags} else secrets.randbelow(2**31)
+    if isinstance(values["popsize"], int) and not isinstance(values["popsize"], bool):
+        values["popsize"] = population_size(values["popsize"])
+    values.update(seed=seed, env_ids=(), recipe_modules=())
     try:
-        es = ESSettings(**{**pick(ESSettings, values), "popsize": population_size(values["popsize"])})
-        policy = PolicySettings(**{**pick(PolicySettings, values), "kind": kind}).seeded(seed)
-        run = RunSettings(**{**pick(RunSettings, values), "seed": seed})
-        env_values = {**pick(EnvSettings, values), "env_ids": (), "recipe_modules": ()}
-        EnvSettings(**env_values)  # checked before any environment is resolved
+        config = TrainConfig.from_values(values, "--config " + args.config if args.config else "flags")
     except (ValueError, TypeError) as error:  # a value out of range or of the wrong type, from a flag or a file
-        raise UserError(str(error)) from None
-    env = EnvSettings(**{**env_values, "env_ids": resolve_environments(values["environment"]),
-                         "recipe_modules": envs.custom_recipe_modules()})
-    check_population_fits(es, len(env.env_ids))
-    return TrainConfig(es=es, policy=policy, env=env, run=run)
+        raise UserError(str(error).removeprefix("flags: ")) from None
+    config = replace(config, policy=config.policy.seeded(seed))
+    env = replace(config.env, env_ids=resolve_environments(config.env.environment),  # checked before resolved
+                  recipe_modules=envs.custom_recipe_modules())
+    check_population_fits(config.es, len(env.env_ids))
+    return replace(config, env=env)
 
 
 def experiment_values(path: str, kind: str) -> dict:
-    """The settings an experiment file gives, flat (``{"lr": 0.2, ...}``); checked against the script."""
+    """The settings an experiment file gives, flat (``{"lr": 0.2, ...}``); every key checked against the
+    script: known, given to this policy kind, of its setting's type."""
+    source = f"--config {path}"
     try:
         sections = read_toml(path)
     except (OSError, ValueError) as error:
-        raise UserError(f"--config {path}: {error}") from None
-    tables = [f"[{name}]" for name, section in sections.items() if name in SECTIONS and not isinstance(section, dict)]
-    if tables:
-        raise UserError(f"--config {path}: {', '.join(tables)} must be a table of settings")
+        raise UserError(f"{source}: {error}") from None
     unknown = [f"[{name}]" for name in sections if name not in SECTIONS and name != "evaluation"]
-    unknown += [f"{name}.{key}" for name, section in sections.items() if name in SECTIONS
-                for key in section if key not in field_names(SECTIONS[name])]
     if unknown:
-        raise UserError(f"--config {path}: unknown settings {', '.join(unknown)}")
-    if sections.get("policy", {}).get("kind", kind) != kind:
-        found = sections["policy"]["kind"]
-        raise UserError(f"--config {path} is a {found} experiment; run it with {TRAIN_SCRIPTS.get(found, 'its script')}")
-    for name, settings in SECTIONS.items():
-        hints = typing.get_type_hints(settings)
-        for key, value in sections.get(name, {}).items():
-            try:
-                check_type(key, value, hints[key])
-            except ValueError as error:
-                raise UserError(f"--config {path}: {name}.{error}") from None
-    return {key: value for name in SECTIONS for key, value in sections.get(name, {}).items() if key != "env_ids"}
+        raise UserError(f"{source}: unknown settings {', '.join(unknown)}")
+    found = sections.get("policy", {}).get("kind", kind) if isinstance(sections.get("policy"), dict) else kind
+    if found != kind:
+        raise UserError(f"{source} is a {found} experiment; run it with {TRAIN_SCRIPTS.get(found, 'its script')}")
+    try:
+        return section_values(sections, source, kind=kind)
+    except ValueError as error:
+        raise UserError(str(error)) from None
 
 
-def pick(settings: type, values: dict) -> dict:
-    names = field_names(settings)
-    return {name: value for name, value in values.items() if name in names}
-
-
-def config_for_resume(kind: str, args: argparse.Namespace, argv: list[str]) -> tuple[TrainConfig, RunFolder]:
+def config_for_resume(kind: str, args: argparse.Namespace) -> tuple[TrainConfig, RunFolder]:
+    """The run's recorded settings, with the flags given: only the resumable ones may differ."""
     folder = RunFolder.existing(args.resume)
     try:
-        config = TrainConfig.from_dict(folder.read_config())
+        config = TrainConfig.from_dict(folder.read_config(), "config.json")
     except (ValueError, TypeError) as error:
         raise UserError(f"--resume {folder.path}: unreadable config.json ({error})") from None
     if config.policy.kind != kind:
         raise UserError(f"--resume {folder.path}: this is a {config.policy.kind} run; resume it with "
                         f"{TRAIN_SCRIPTS[config.policy.kind]}")
-    given = given_flags(argv)
-    check_resume_flags(config, args, given)
-    return config.with_values(**{name: getattr(args, name) for name in RESUMABLE if name in given}), folder
-
-
-def check_resume_flags(config: TrainConfig, args: argparse.Namespace, given: set[str]) -> None:
-    """A flag that defines the run, given again on resume, must say what the run already uses."""
-    if "config" in given:
+    if args.config is not None:
         raise UserError("--config cannot be combined with --resume: the run's settings are in its config.json")
-    differing = []
-    for name in sorted(given - set(RESUMABLE) - {"resume"}):
-        value, stored = getattr(args, name), config.value(name)
-        if name == "popsize":
-            value = value + value % 2  # as a new run would round it
-        if value != stored:
-            differing.append(f"--{name} {value} (the run has {stored})")
-    if differing:
-        raise UserError(f"--resume {args.resume}: {', '.join(differing)}; a resumed run keeps its settings (only "
-                        f"{', '.join('--' + name for name in RESUMABLE)} may change): start a new run instead")
+    flags = given(args)
+    if "popsize" in flags:
+        flags["popsize"] += flags["popsize"] % 2  # as a new run would round it
+    resumable = [item for item in declared() if item.spec.resumable]
+    try:
+        return config.overlay(flags, {item.name for item in resumable}), folder
+    except Contradiction as error:
+        raise UserError(f"--resume {args.resume}: {error}; a resumed run keeps its settings (only "
+                        f"{', '.join(item.label for item in resumable)} may change): start a new run instead") from None
+    except ValueError as error:  # a resumable value out of range
+        raise UserError(str(error)) from None
 
 
 def check_tensorboard(config: TrainConfig) -> None:
@@ -330,9 +222,9 @@ def train_main(kind: str, parser: Parser, argv: list[str] | None = None) -> int:
     trainer = None
     try:
         if args.resume is not None:
-            config, folder = config_for_resume(kind, args, argv)
+            config, folder = config_for_resume(kind, args)
         else:
-            config, folder = config_from_args(kind, args, argv), None
+            config, folder = config_from_args(kind, args), None
             check_writable(config.run.folder)
         check_tensorboard(config)
         trainer, problem = start(config, folder)
@@ -374,8 +266,7 @@ def report_end(trainer: Trainer, config: TrainConfig, status: Status) -> None:
         # ``best`` only with --eval_every: otherwise it is the centre with the best single-episode
         # return, a noisy choice.
         prefix = "best" if config.es.eval_every is not None and trainer.history.best_theta is not None else "last"
-        paths = {role: folder.named_path(prefix, role) for role in trainer.policy.roles}
-        log(f"done; evaluate with: {evaluate_hint(config, paths)}")
+        log(f"done; evaluate with: {evaluate_hint(config, folder.named_path(prefix, trainer.policy.roles[0]))}")
     elif status is Status.INTERRUPTED:
         log(f"interrupted after generation {trainer.state.generation}; resume with: "
             f"{resume_hint(config, folder.path)}")

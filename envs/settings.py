@@ -1,20 +1,28 @@
-"""The environment settings of a run, as frozen data (``config`` joins them with the others)."""
+"""The environment settings of a run, as frozen data (``cli.config`` joins them with the others); each
+field is its option's one declaration (``settings.setting``)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+from settings import check, setting
+
 
 @dataclass(frozen=True)
 class EnvSettings:
-    environment: str = "CarRacing-v0"  # as given on the command line: one id, or several separated by commas
-    env_ids: tuple[str, ...] = ()  # the registered ids made (resolved when a run starts); fitness: their mean
-    recipe_modules: tuple[str, ...] = ()  # modules that register custom recipes (``envs.recipes``)
-    max_episode_steps: int | None = None  # cap on the policy steps of an episode (``envs.wrappers.MaxEpisodeSteps``)
+    environment: str = setting("CarRacing-v0", nonempty=True, metavar="ID", scripts=("train", "evaluate"),
+                               help="Gymnasium, pyBullet or MuJoCo id, or module:Id for a custom environment; several "
+                                    "ids separated by commas are trained together (fitness = mean over them)")
+    # the registered ids made (resolved when a run starts); fitness: their mean
+    env_ids: tuple[str, ...] = setting((), flag=None, derived=True, help="the ids --environment resolves to")
+    recipe_modules: tuple[str, ...] = setting((), flag=None, derived=True,
+                                              help="modules that register custom recipes (envs.recipes)")
+    max_episode_steps: int | None = setting(None, low=1, metavar="N", shown_default="the environment's own limit",
+                                            group="beyond the original algorithm (defaults: the original)",
+                                            help="end an episode (as truncated) after N policy steps")
 
     def __post_init__(self) -> None:
-        if self.max_episode_steps is not None and self.max_episode_steps < 1:
-            raise ValueError(f"--max_episode_steps must be a whole number >= 1, got {self.max_episode_steps}")
+        check(self)
 
     @property
     def label(self) -> str:

@@ -26,12 +26,9 @@ no schedule and pytorch-es skipped its decay under Adam; ``--decay 1`` gives the
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol
+from typing import Protocol
 
 import numpy as np
-
-if TYPE_CHECKING:
-    from es.settings import ESSettings
 
 OptimizerState = dict[str, np.ndarray]
 
@@ -105,6 +102,16 @@ OPTIMIZERS = {
 }
 
 
-def make_optimizer(settings: ESSettings) -> Optimizer:
+class OptimizerSettings(Protocol):
+    """What an optimiser is made from (``es.settings.ESSettings``, which imports this module for the names)."""
+
+    optimizer: str
+    beta1: float
+    beta2: float
+    momentum: float
+    l2coeff: float
+
+
+def make_optimizer(settings: OptimizerSettings) -> Optimizer:
     """The optimiser ``settings`` name (ESSettings has checked the name)."""
     return OPTIMIZERS[settings.optimizer](settings)

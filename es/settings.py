@@ -1,102 +1,75 @@
-"""The settings of the ES and of a run, as frozen data (the other concerns: ``policies.settings``,
-``envs.settings``; ``config`` joins the four into ``config.json``).
+"""The settings of the ES and of a run, as frozen data (the other concerns: ``policies.registry``'s
+``PolicySettings``, ``envs.settings``; ``cli.config`` joins the four into ``config.json``).
 
-Every constant the original hard-coded is a field here, with the original's value as its default
-(upstream spec §2.1, §9.1 item 7): the learning-rate floor, the sigma decay and floor, and the L2
-coefficient of the fitness penalty. The options beyond the original (the shaping, the optimiser,
-weight decay in the gradient, observation statistics, centre evaluation; OpenAI's es-starter and
-pytorch-es, spec §2.5 and §7.4) default to the original's behaviour. Fields are named as their
-flags, and a value out of range is refused with a message naming the flag.
+Each field is the one declaration of its option (``settings.setting``): its default, range or choices,
+flag, help, and whether a resume may change it. Every constant the original hard-coded is a field here,
+with the original's value as its default (upstream spec §2.1, §9.1 item 7): the learning-rate floor, the
+sigma decay and floor, and the L2 coefficient of the fitness penalty; those have no flag (experiment files
+and config.json only). The options beyond the original (the shaping, the optimiser, weight decay in the
+gradient, observation statistics, centre evaluation; OpenAI's es-starter and pytorch-es, spec §2.5 and
+§7.4) default to the original's behaviour.
 """
 
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import dataclass
 
 from es.optimizers import OPTIMIZERS
 from es.shaping import SHAPINGS
+from settings import ANY, SEED_RANGE, check, setting
 
-
-def check_setting(name: str, value, valid: bool, expected: str) -> None:
-    """Refuse ``value`` of the setting (and flag) ``name`` unless ``valid``."""
-    if not valid:
-        raise ValueError(f"--{name} must be {expected}, got {value}")
-
-
-def check_choice(name: str, value: str, choices) -> None:
-    check_setting(name, repr(value), value in choices, f"one of {', '.join(choices)}")
-
-
-def is_number(value) -> bool:
-    """A finite int or float (an experiment file or config.json can hold anything: a string, a bool)."""
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-
-
-def is_whole(value) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool)
-
-
-def check_number(name: str, value, low: float, high: float = math.inf, low_open: bool = False) -> None:
-    """``value`` a finite number in [low, high] ((low, high] with ``low_open``)."""
-    valid = is_number(value) and (low < value if low_open else low <= value) and value <= high
-    bounds = f"{'(' if low_open else '['}{low:g}, {high:g}]" if high < math.inf else \
-        f"{'>' if low_open else '>='} {low:g}"
-    check_setting(name, value, valid, f"a number {'in ' if high < math.inf else ''}{bounds}")
-
-
-def check_whole(name: str, value, low: int) -> None:
-    check_setting(name, value, is_whole(value) and value >= low, f"a whole number >= {low}")
+BACKENDS = ("process", "ray")  # es.backends: a process pool on this machine, or Ray
+MODERN = "beyond the original algorithm (defaults: the original)"
 
 
 @dataclass(frozen=True)
 class ESSettings:
     """What defines the search: two runs with equal ESSettings (and seed) step alike."""
 
-    popsize: int = 200  # even: mirrored pairs
-    lr: float = 0.2
-    decay: float = 0.995  # lr *= decay per generation while lr > lr_floor
-    sigma: float = 0.1
-    lr_floor: float = 0.001
-    sigma_decay: float = 0.999  # sigma *= sigma_decay per generation while sigma > sigma_floor
-    sigma_floor: float = 0.01
-    fitness_l2: float = 0.01  # fitness = return - fitness_l2 * mean(theta_m^2) over the penalised part
-    episodes: int = 1  # episodes per fitness evaluation (the fitness is their mean)
-    noise_size: int | None = None  # floats in the noise table; None: sized to the parameter count
-    shaping: str = "rank_std"  # es.shaping.SHAPINGS
-    optimizer: str = "sgd"  # es.optimizers.OPTIMIZERS
-    beta1: float = 0.9  # adam
-    beta2: float = 0.999  # adam
-    momentum: float = 0.9  # momentum
-    l2coeff: float = 0.0  # weight decay in the gradient: g <- g - l2coeff * theta
-    obs_norm_prob: float = 0.01  # with obs_norm: the fraction of mirrored pairs whose observations count
-    eval_every: int | None = None  # every this many generations the centre runs eval_episodes episodes
-    eval_episodes: int = 10
-    variable_ep_len: bool = False  # pytorch-es: cap each generation's episodes at twice the last one's mean length
+    popsize: int = setting(200, low=2, metavar="N", help="population size (even: mirrored pairs)")
+    lr: float = setting(0.2, low=0, low_open=True, help="ES learning rate")
+    decay: float = setting(0.995, low=0, high=1, low_open=True,
+                           help="learning-rate decay per generation (while lr > lr_floor)")
+    sigma: float = setting(0.1, low=0, low_open=True, help="initial noise standard deviation")
+    lr_floor: float = setting(0.001, flag=None, low=0, help="lr decays while above this")
+    sigma_decay: float = setting(0.999, flag=None, low=0, high=1, low_open=True,
+                                 help="sigma *= sigma_decay per generation while sigma > sigma_floor")
+    sigma_floor: float = setting(0.01, flag=None, low=0, help="sigma decays while above this")
+    fitness_l2: float = setting(0.01, low=0, metavar="C", group=MODERN,
+                                help="the original's L2 penalty in the fitness: return - C * mean(theta_m^2)")
+    episodes: int = setting(1, low=1, metavar="E", help="episodes per fitness evaluation (the fitness is their mean)")
+    noise_size: int | None = setting(None, flag=None, low=1,
+                                     help="floats in the noise table; default: sized to the parameter count")
+    shaping: str = setting("rank_std", choices=SHAPINGS, group=MODERN,
+                           help="fitness shaping: rank_std (the original: centered ranks, standardised), rank "
+                                "(OpenAI's centered ranks), none (the fitness, standardised), nes (pytorch-es's NES "
+                                "utilities)")
+    optimizer: str = setting("sgd", choices=OPTIMIZERS, aliases={"useAdam": "adam"}, group=MODERN,
+                             help="sgd (the original), adam or momentum (OpenAI's; gradient sum F*eps / N); --lr is "
+                                  "the step size")
+    beta1: float = setting(0.9, low=0, high=1, high_open=True, requires=("optimizer", "adam"), group=MODERN,
+                           help="Adam's first-moment decay")
+    beta2: float = setting(0.999, low=0, high=1, high_open=True, requires=("optimizer", "adam"), group=MODERN,
+                           help="Adam's second-moment decay")
+    momentum: float = setting(0.9, low=0, high=1, high_open=True, requires=("optimizer", "momentum"), group=MODERN,
+                              help="the momentum of --optimizer momentum")
+    l2coeff: float = setting(0.0, low=0, metavar="C", group=MODERN,
+                             help="weight decay in the gradient, g <- g - C * theta (OpenAI's l2coeff)")
+    obs_norm_prob: float = setting(0.01, low=0, high=1, low_open=True, requires=("obs_norm", True), metavar="P",
+                                   group=MODERN, help="the fraction of mirrored pairs whose observations update the "
+                                                      "statistics of --obs_norm")
+    eval_every: int | None = setting(None, low=1, metavar="G", group=MODERN,
+                                     help="every G generations the centre also runs --eval_episodes episodes on seeds "
+                                          "of their own; their mean picks best.dat")
+    eval_episodes: int = setting(10, low=1, metavar="K", requires=("eval_every", ANY), group=MODERN,
+                                 help="the centre's evaluation episodes of --eval_every")
+    variable_ep_len: bool = setting(False, group=MODERN,
+                                    help="pytorch-es's adaptive episode length: each generation's episodes end after "
+                                         "twice the mean length of the last generation's perturbed episodes")
 
     def __post_init__(self) -> None:
-        """Every value checked, whether it came from a flag, an experiment file or a config.json."""
-        check_whole("popsize", self.popsize, 2)
-        for name in ("lr", "sigma"):
-            check_number(name, getattr(self, name), 0, low_open=True)
-        for name in ("decay", "sigma_decay"):
-            check_number(name, getattr(self, name), 0, 1, low_open=True)
-        check_setting("obs_norm_prob", self.obs_norm_prob, is_number(self.obs_norm_prob) and 0 < self.obs_norm_prob <= 1,
-                      "in (0, 1]")
-        for name in ("lr_floor", "sigma_floor", "l2coeff", "fitness_l2"):
-            check_number(name, getattr(self, name), 0)
-        for name in ("beta1", "beta2", "momentum"):
-            value = getattr(self, name)
-            check_setting(name, value, is_number(value) and 0 <= value < 1, "in [0, 1)")
-        check_whole("episodes", self.episodes, 1)
-        check_whole("eval_episodes", self.eval_episodes, 1)
-        if self.eval_every is not None:
-            check_whole("eval_every", self.eval_every, 1)
-        if self.noise_size is not None:
-            check_whole("noise_size", self.noise_size, 1)
-        check_choice("shaping", self.shaping, SHAPINGS)
-        check_choice("optimizer", self.optimizer, OPTIMIZERS)
+        check(self)
 
     def evaluates_centre(self, generation: int) -> bool:
         """Whether the centre runs its evaluation episodes in generation ``generation`` (0-based):
@@ -104,26 +77,49 @@ class ESSettings:
         return self.eval_every is not None and (generation + 1) % self.eval_every == 0
 
 
+def _threads(value: int) -> bool:
+    return value == -1 or value >= 1
+
+
+def original_threads(text: str) -> int:
+    """--threads as the original took it: any value <= 1 but -1 (0, -2) ran serially, so it means 1."""
+    value = int(text)
+    if value == 0 or value < -1:
+        try:
+            print(f"note: --threads {value} runs everything in this process, as the original did; that is "
+                  "--threads 1", flush=True)
+        except BrokenPipeError:  # nobody reads the output: the run goes on (cli.errors.say)
+            pass
+        return 1
+    return value
+
+
 @dataclass(frozen=True)
 class RunSettings:
     """How and where a run executes; ``seed`` and ``generations`` aside, none of it changes a result."""
 
-    generations: int = 300
-    print_every: int = 1  # save the files every this many generations
-    folder: str = "weights"
-    threads: int = -1  # -1: one worker per core
-    seed: int = 0
-    backend: str = "process"  # "process" or "ray"
-    ray_address: str | None = None  # --backend ray: None starts a local Ray
-    tensorboard: bool = False  # also write every metrics column as TensorBoard scalars
+    generations: int = setting(300, low=1, metavar="G", resumable=True,
+                               help="number of generations (with --resume: the total, counting those already run)")
+    print_every: int = setting(1, low=1, metavar="K", resumable=True, help="save files every K generations")
+    folder: str = setting("weights", nonempty=True, metavar="DIR", help="where run folders are created")
+    threads: int = setting(-1, rule=(_threads, "-1 (all cores) or a whole number >= 1"), metavar="W", resumable=True,
+                           parse=original_threads, help="worker processes; -1 = all cores, 1 = run in this process (0 and other negative "
+                                "values too, as the original)")
+    seed: int = setting(0, low=SEED_RANGE[0], high=SEED_RANGE[1], shown_default="a random one, printed and saved",
+                        help="seed of the run")
+    backend: str = setting("process", choices=BACKENDS, resumable=True,
+                           help="parallel backend for --threads > 1: a process pool on this machine, or Ray (one "
+                                "machine or a cluster; pip install -r requirements-ray.txt)")
+    ray_address: str | None = setting(None, requires=("backend", "ray"), metavar="ADDRESS", resumable=True,
+                                      shown_default="start a local Ray with --threads CPUs",
+                                      help="'auto' joins the cluster `ray start` runs on this machine, HOST:PORT "
+                                           "another one")
+    tensorboard: bool = setting(False, resumable=True, group=MODERN,
+                                help="also write every metrics column as TensorBoard scalars in <run>/tensorboard "
+                                     "(pip install -r requirements-tensorboard.txt)")
 
     def __post_init__(self) -> None:
-        check_whole("generations", self.generations, 1)
-        check_whole("print_every", self.print_every, 1)
-        check_setting("threads", self.threads, is_whole(self.threads) and (self.threads == -1 or self.threads >= 1),
-                      "-1 (all cores) or a whole number >= 1")
-        check_setting("seed", self.seed, is_whole(self.seed) and 0 <= self.seed < 2**31,
-                      f"a whole number from 0 to {2**31 - 1}")
+        check(self)
 
     @property
     def workers(self) -> int:
@@ -133,6 +129,3 @@ class RunSettings:
     def in_process(self) -> bool:
         """Everything in this process: ``--threads 1``, or a one-core machine's pool."""
         return self.threads == 1 or (self.backend == "process" and self.workers == 1)
-
-
-RESUMABLE = ("generations", "threads", "backend", "ray_address", "print_every", "tensorboard")  # what a resume may change

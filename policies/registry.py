@@ -19,12 +19,17 @@ from dataclasses import dataclass, replace
 from typing import Callable
 
 from policies.base import Policy
-from policies.hebbian import HebbianPolicy
+from policies.hebbian import DISTRIBUTIONS, HebbianPolicy
 from policies.network import NetworkSpec
-from policies.pytorch_es import ConvLSTMPolicy, SmallNetPolicy
 from policies.normalised import NormalisedInputs
-from policies.reservoir import Hyperparameters, ReservoirFrontEnd, check_settings, head_network
+from policies.pytorch_es import ConvLSTMPolicy, SmallNetPolicy
+from policies.init import INIT_CHOICES
+from policies.reservoir import BOUNDS, MAX_UNITS, Hyperparameters, ReservoirFrontEnd, check_settings, head_network
+from policies.rules import RULES
 from policies.static import StaticPolicy
+from settings import SEED_RANGE, check, setting
+
+MODERN = "beyond the original algorithm (defaults: the original)"
 
 
 @dataclass(frozen=True)
@@ -40,31 +45,63 @@ NETWORKS: dict[str, Network] = {
 }
 
 
+RESERVOIR = "reservoir front end (ER-MRL's echo state network before the network)"
+EVALUATED = ("train", "evaluate")  # flags of the evaluate scripts too, which take them from a run's config.json
+
+
 @dataclass(frozen=True)
 class PolicySettings:
-    kind: str = "static"
-    hebb_rule: str = "ABCD_lr"  # Hebbian kinds: the rule family
-    init_weights: str = "uni"  # Hebbian kinds: each episode's initial weights
-    distribution: str = "normal"  # Hebbian kinds: generation 0's coefficients (and CNN / co-evolved weights)
-    network: str = "default"  # static kinds: the network's shape, NETWORKS
-    obs_norm: bool = False  # the input layer sees (obs - mean) / std (``policies.normalised``); not for pixels
-    obs_clip: float | None = None  # with obs_norm: clip the normalised observations to +-obs_clip
-    reservoir: bool = False  # the network reads an echo state network's state (``policies.reservoir``); not pixels
-    reservoir_units: int = 100  # ER-MRL's --units
+    """The policy of a run; each field is its option's one declaration (``settings.setting``)."""
+
+    kind: str = setting("static", flag=None, choices=lambda: KINDS, evaluation=True,
+                        help="the policy kind: the script's (train_static.py, train_hebb.py)")
+    hebb_rule: str = setting("ABCD_lr", choices=RULES, metavar="RULE", applies=("hebbian",), scripts=EVALUATED, evaluation=True,
+                             help="Hebbian rule (the one the coefficients were evolved for)")
+    init_weights: str = setting("uni", choices=INIT_CHOICES, metavar="INIT", applies=("hebbian",), scripts=EVALUATED, evaluation=True,
+                                help="initial weights of every episode (coevolve: evolved with the rules)")
+    distribution: str = setting("normal", choices=DISTRIBUTIONS, applies=("hebbian",),
+                                help="generation-0 coefficients (and CNN / co-evolved weights): normal N(0,1) or "
+                                     "uniform U(-1,1)")
+    network: str = setting("default", choices=lambda: NETWORKS, applies=("static",), scripts=EVALUATED,
+                           evaluation=True,
+                           help="default: the original's MLP (state vectors) or CNN (images); small: pytorch-es's "
+                                "64-64 selu MLP (state vectors); lstm: pytorch-es's conv-LSTM on its 42x42 normalised "
+                                "frames (images)")
+    obs_norm: bool = setting(False, evaluation=True, group=MODERN,
+                             help="normalise observations by running statistics (OpenAI's RunningStat); not for pixels")
+    obs_clip: float | None = setting(None, low=0, low_open=True, requires=("obs_norm", True), metavar="C",
+                                     evaluation=True, group=MODERN, shown_default="no clip",
+                                     help="clip normalised observations to +-C (OpenAI: 5)")
+    reservoir: bool = setting(False, scripts=EVALUATED, evaluation=True, group=RESERVOIR,
+                              help="the network reads the state of a random reservoir (ER-MRL's leaky echo state "
+                                   "network, reset every episode) that reads the observation; not for pixels; needs "
+                                   "reservoirpy (pip install -r requirements-reservoirs.txt)")
+    reservoir_units: int = setting(100, low=1, high=MAX_UNITS, requires=("reservoir", True), scripts=EVALUATED,
+                                   evaluation=True, metavar="N", group=RESERVOIR, help="its neurons (ER-MRL's --units)")
     # the reservoir's hyperparameters, or with reservoir_evolve where their evolution starts; default: those
     # ER-MRL's CMA-ES found for PPO on CartPole without velocities (README: lr 0.34, sr 1.00), a classic
     # echo state network (memory of a few steps, at the edge of stability), and ER-MRL's input scaling 1
-    reservoir_lr: float = 0.3
-    reservoir_sr: float = 1.0
-    reservoir_iss: float = 1.0
-    reservoir_evolve: bool = False  # lr, sr and iss evolved as three more parameters of theta
-    reservoir_seed: int | None = None  # the seed of its matrices; a new run fills in its own --seed
+    reservoir_lr: float = setting(0.3, low=0, high=1, low_open=True, requires=("reservoir", True), scripts=EVALUATED,
+                                  evaluation=True, metavar="LR", group=RESERVOIR,
+                                  help="its leak rate; with --reservoir_evolve where evolution starts")
+    reservoir_sr: float = setting(1.0, low=0, low_open=True, requires=("reservoir", True), scripts=EVALUATED,
+                                  evaluation=True, metavar="SR", group=RESERVOIR,
+                                  help="the spectral radius of its recurrent weights")
+    reservoir_iss: float = setting(1.0, low=0, low_open=True, requires=("reservoir", True), scripts=EVALUATED,
+                                   evaluation=True, metavar="ISS", group=RESERVOIR,
+                                   help="the scaling of its input weights")
+    reservoir_evolve: bool = setting(False, requires=("reservoir", True), evaluation=True, group=RESERVOIR,
+                                     help="evolve its leak rate, spectral radius and input scaling with the network: "
+                                          "three more parameters, log-scale within ER-MRL's bounds "
+                                          + ", ".join(f"{name} [{low:g}, {high:g}]" for name, (low, high) in
+                                                      BOUNDS.items()))
+    reservoir_seed: int | None = setting(None, low=SEED_RANGE[0], high=SEED_RANGE[1], requires=("reservoir", True),
+                                         scripts=EVALUATED, evaluation=True, group=RESERVOIR, metavar="SEED",
+                                         shown_default="the run's --seed",
+                                         help="the seed of its random matrices")
 
     def __post_init__(self) -> None:
-        if self.obs_clip is not None and not 0 < self.obs_clip < float("inf"):
-            raise ValueError(f"--obs_clip must be a number > 0, got {self.obs_clip}")
-        if self.reservoir_evolve and not self.reservoir:
-            raise ValueError("--reservoir_evolve evolves the hyperparameters of --reservoir; add --reservoir")
+        check(self)
         check_settings(self.reservoir_units, self.reservoir_hyperparameters, self.reservoir_evolve,
                        self.reservoir_seed)
 

@@ -24,9 +24,8 @@ from es.backends.base import (
 from es.backends.process import ProcessEvaluator
 from es.backends.serial import SerialEvaluator
 from es.noise import NoiseTable
-from es.settings import RunSettings
+from es.settings import BACKENDS, RunSettings
 
-BACKENDS = ("process", "ray")
 RAY_INSTALL_HINT = "install it with: pip install -r requirements-ray.txt (or pip install -e .[ray])"
 
 
