@@ -46,7 +46,8 @@ import functools
 import math
 import types
 import typing
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 SEED_RANGE = (0, 2**31 - 1)  # every seed the project takes: numpy's and Gymnasium's int32 seeds
 ANY = object()  # ``requires=("eval_every", ANY)``: any value but off (False, None)

@@ -57,7 +57,7 @@ class TrainConfig:
                 for name, settings in SECTIONS.items()}
 
     @classmethod
-    def from_dict(cls, data: dict, source: str = "config.json") -> "TrainConfig":
+    def from_dict(cls, data: dict, source: str = "config.json") -> TrainConfig:
         """A run's config.json: every section, every key known; keys outside the sections are information
         (versions, the command, the layout). A flat object (config.json before sections) is read as it was."""
         if "es" not in data and "kind" in data:
@@ -70,7 +70,7 @@ class TrainConfig:
         return cls.from_values(section_values(data, source, recorded=True), source)
 
     @classmethod
-    def from_values(cls, values: dict, source: str) -> "TrainConfig":
+    def from_values(cls, values: dict, source: str) -> TrainConfig:
         """The settings from flat values (``{"lr": 0.2, ...}``); each value's type is checked, then the settings
         check their values."""
         for item in declared():
@@ -80,12 +80,12 @@ class TrainConfig:
                                         if item.name in values}) for name, settings in SECTIONS.items()})
 
     @classmethod
-    def from_toml(cls, path: str | Path) -> "TrainConfig":
+    def from_toml(cls, path: str | Path) -> TrainConfig:
         sections = read_toml(path)
         kind = sections.get("policy", {}).get("kind", "static")
         return cls.from_values(section_values(sections, f"--config {path}", kind=kind), f"--config {path}")
 
-    def with_values(self, **values) -> "TrainConfig":
+    def with_values(self, **values) -> TrainConfig:
         """A copy with the named fields changed, wherever they live (``lr=0.1, threads=2``)."""
         unknown = set(values) - {item.name for item in declared()}
         if unknown:
@@ -100,7 +100,7 @@ class TrainConfig:
         """A field by name, whichever section holds it."""
         return getattr(getattr(self, section_of(name)), name)
 
-    def overlay(self, given: dict, changeable) -> "TrainConfig":
+    def overlay(self, given: dict, changeable) -> TrainConfig:
         """These settings with the ``given`` values of those in ``changeable``; every other given value must
         be what these settings hold already (a ``Contradiction`` lists those that are not). Resume (only the
         resumable settings change) and evaluation (the policy is the run's) both start from a run this way."""
@@ -120,7 +120,7 @@ def section_values(sections: dict, source: str, kind: str | None = None, recorde
     for name, settings in SECTIONS.items():
         entries = sections.get(name, {})
         if not isinstance(entries, dict):
-            raise ValueError(f"{source}: [{name}] must be a table of settings")
+            raise ValueError(f"{source}: [{name}] must be a table of settings")  # noqa: TRY004 (a user error)
         known = {item.name: item for item in options(settings)}
         for key, value in entries.items():
             item = known.get(key)

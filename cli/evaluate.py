@@ -19,16 +19,15 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from pathlib import Path
-
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
 from cli.config import Contradiction, TrainConfig, declared
 from cli.errors import USER_ERRORS, Parser, UserError, explained, say
-from cli.hints import EVALUATE_FLAGS, EVALUATE_SCRIPTS, MAIN_ROLE
 from cli.flags import add_settings, defaults, flag_value, given, positive_int, seed_value
+from cli.hints import EVALUATE_FLAGS, EVALUATE_SCRIPTS, MAIN_ROLE
 from cli.train import resolve_environments
 from envs import ProblemSpec
 from envs.headless import RenderingUnavailable, check_can_render, check_display, choose_mujoco_gl
@@ -37,7 +36,6 @@ from es.observations import SavedStatistics, load_statistics, statistics_path
 from es.runfolder import named_file
 from report.video import check_video_path
 from settings import SEED_RANGE, unmet_requirement
-
 
 COEV_ROLES = (  # --path_coev's
     "coevolved_initial_weights", "CNN_parameters")

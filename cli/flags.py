@@ -13,7 +13,7 @@ import argparse
 
 import numpy as np
 
-from cli.config import SECTIONS, declared
+from cli.config import SECTIONS
 from es.settings import original_threads as threads_value  # the ER-MRL and experiment scripts' too
 from settings import SEED_RANGE, Option, options
 
@@ -60,7 +60,7 @@ def add_settings(parser: argparse.ArgumentParser, script: str, kind: str, defaul
         text = help_text(item, (defaults or {}).get(item.name))
         if evaluation_note and item.spec.evaluation:
             text = f"{text}{evaluation_note}"
-        common = dict(dest=item.name, default=argparse.SUPPRESS, help=text)
+        common = {"dest": item.name, "default": argparse.SUPPRESS, "help": text}
         if item.base_type() is bool and item.spec.parse is None:
             add(f"--{item.flag}", action="store_true", **common)
         else:

@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 from cli.config import TRAIN_SCRIPTS, TrainConfig
+
 ROOT = Path(__file__).resolve().parent.parent
 
 EVALUATE_SCRIPTS = {"static": "evaluate_static.py", "hebbian": "evaluate_hebb.py"}

@@ -16,7 +16,6 @@ from dataclasses import replace
 from pathlib import Path
 
 import envs
-
 from cli.config import SECTIONS, TRAIN_SCRIPTS, Contradiction, TrainConfig, declared, read_toml, section_values
 from cli.errors import USER_ERRORS, Parser, UserError, explained, say
 from cli.flags import add_settings, defaults, given, non_empty
@@ -161,7 +160,7 @@ def check_writable(folder: str) -> None:
 
 
 def versions() -> dict:
-    import importlib.metadata as metadata
+    from importlib import metadata
 
     found = {"python": sys.version.split()[0]}
     for package in ("numpy", "torch", "gymnasium", "mujoco", "pybullet", "pybullet-envs-gymnasium",

@@ -15,15 +15,15 @@ are made with.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Callable
 
 from policies.base import Policy
 from policies.hebbian import DISTRIBUTIONS, HebbianPolicy
+from policies.init import INIT_CHOICES
 from policies.network import NetworkSpec
 from policies.normalised import NormalisedInputs
 from policies.pytorch_es import ConvLSTMPolicy, SmallNetPolicy
-from policies.init import INIT_CHOICES
 from policies.reservoir import BOUNDS, MAX_UNITS, Hyperparameters, ReservoirFrontEnd, check_settings, head_network
 from policies.rules import RULES
 from policies.static import StaticPolicy
@@ -109,7 +109,7 @@ class PolicySettings:
     def reservoir_hyperparameters(self) -> Hyperparameters:
         return Hyperparameters(self.reservoir_lr, self.reservoir_sr, self.reservoir_iss)
 
-    def seeded(self, run_seed: int) -> "PolicySettings":
+    def seeded(self, run_seed: int) -> PolicySettings:
         """These settings with the reservoir's seed filled in: the run's, unless one was given."""
         if not self.reservoir or self.reservoir_seed is not None:
             return self
