@@ -368,14 +368,14 @@ def test_fitness_values_are_float32_and_dat_archives_are_named_after_their_file(
 
 @pytest.mark.parametrize("toml, named", [
     ("[es]\nsigma = 0", "--sigma must be a number > 0, got 0"),
-    ("[es]\nlr = \"0.1\"", "es.lr must be a number, got '0.1'"),
-    ("[es]\ndecay = 2.0", "--decay must be a number in (0, 1], got 2.0"),
+    ("[es]\nlr = \"0.1\"", "--lr must be a number, got '0.1'"),
+    ("[es]\ndecay = 2.0", "--decay must be in (0, 1], got 2.0"),
     ("[es]\nepisodes = 0", "--episodes must be a whole number >= 1, got 0"),
     ("[es]\nnoise_size = 100", "--noise_size 100 is smaller than the 8832 parameters"),
     ("[run]\nthreads = 0", "--threads must be -1 (all cores) or a whole number >= 1, got 0"),
     ("[run]\nprint_every = 0", "--print_every must be a whole number >= 1, got 0"),
-    ("[policy]\nobs_norm = \"false\"", "policy.obs_norm must be true or false, got 'false'"),
-    ("[env]\nenvironment = 5", "env.environment must be a string, got 5"),
+    ("[policy]\nobs_norm = \"false\"", "--obs_norm must be true or false, got 'false'"),
+    ("[env]\nenvironment = 5", "--environment must be a string, got 5"),
     ("policy = 3", "[policy] must be a table of settings"),
     ("[es]\nobs_norm_prob = 0.5", "--obs_norm_prob has an effect only with --obs_norm"),
 ])

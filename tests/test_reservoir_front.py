@@ -223,20 +223,19 @@ def test_a_trained_run_evaluates_with_the_printed_command_or_its_config(case, ev
     run_dir, output = trained[case]
     printed = shlex.split(output.strip().splitlines()[-1].split("evaluate with: ", 1)[1])[2:]
     printed = printed[:printed.index("--episodes")]
-    assert printed[printed.index("--reservoir_seed") + 1] == "5"
+    assert len(printed) == 2 and Path(printed[1]).parent == run_dir  # the weight file: the rest is the run's
     returns = evaluated_returns(evaluate, *printed, json_path=tmp_path / "printed.json")
-    from_config = [word for index, word in enumerate(printed) if not word.startswith("--reservoir")
-                   and not printed[index - 1].startswith("--reservoir")]  # the run folder's config.json instead
-    assert evaluated_returns(evaluate, *from_config, json_path=tmp_path / "config.json") == returns
-    seed_at = printed.index("--reservoir_seed")
-    no_seed = printed[:seed_at] + printed[seed_at + 2:]  # the flags, but the seed from the run folder
-    assert evaluated_returns(evaluate, *no_seed, json_path=tmp_path / "no_seed.json") == returns
     config = TrainConfig.from_dict(json.loads((run_dir / "config.json").read_text()))
+    policy = config.policy
+    spelled = [*printed, "--environment", "CartPole-v1", "--reservoir", "--reservoir_units", policy.reservoir_units,
+               "--reservoir_seed", policy.reservoir_seed]  # the run's settings given again agree with it
+    assert evaluated_returns(evaluate, *spelled, json_path=tmp_path / "spelled.json") == returns
+    code, output = run(evaluate, *printed, "--reservoir_seed", "6")
+    assert code == 2 and "--reservoir_seed 6 (the run has 5)" in output
     problem = ProblemSpec(("CartPole-v1",), config.policy).build()
     try:
-        paths = {word: printed[index + 1] for index, word in enumerate(printed) if word.startswith("--path_")}
-        arrays = {role: load_dat(paths[flag]) for role, flag in (("weights", "--path_weights"), ("coeffs", "--path_hebb"),
-                                                                 ("reservoir", "--path_reservoir")) if flag in paths}
+        arrays = {role: load_dat(run_dir / (f"last_{role}.dat" if role != "weights" else "last.dat"))
+                  for role in problem.policy.roles}
         params = problem.policy.load(arrays)
         assert [problem.evaluate(params, 0, seed).total_return for seed in range(3)] == returns
     finally:
@@ -251,12 +250,12 @@ def test_a_trained_run_evaluates_with_the_printed_command_or_its_config(case, ev
                                   "--reservoir_units out"),
     (("--reservoir_evolve",), "--reservoir_evolve has an effect only with --reservoir"),
     (("--reservoir", "--reservoir_units", "0"), "--reservoir_units must be a whole number from 1 to 10000, got 0"),
-    (("--reservoir", "--reservoir_lr", "1.5"), "--reservoir_lr (the leak rate) must be in (0, 1], got 1.5"),
+    (("--reservoir", "--reservoir_lr", "1.5"), "--reservoir_lr must be in (0, 1], got 1.5"),
     (("--reservoir", "--reservoir_sr", "-1"), "--reservoir_sr must be a number > 0, got -1.0"),
     (("--reservoir", "--reservoir_iss", "inf"), "--reservoir_iss must be a number > 0, got inf"),
     (("--reservoir", "--reservoir_evolve", "--reservoir_lr", "1"),
      "--reservoir_lr 1.0 is where --reservoir_evolve starts; it must lie strictly between ER-MRL's bounds 0.01 and 1"),
-    (("--reservoir", "--reservoir_seed", "-3"), "argument --reservoir_seed: must be a whole number from 0 to"),
+    (("--reservoir", "--reservoir_seed", "-3"), "--reservoir_seed must be a whole number from 0 to"),
     (("--reservoir", "--environment", "CarRacing-v3"), "--reservoir reads observation vectors, but these observations "
                                                        "are images (3, 84, 84); leave --reservoir out"),
 ])
@@ -288,9 +287,13 @@ def test_bad_evaluation_input_is_one_line(trained, tmp_path):
     save_dat(outside, load_dat(weights))
     short = tmp_path / "short.dat"
     save_dat(short, np.zeros(2, np.float32))
+    alone = tmp_path / "alone"  # the run's config.json and weights, its evolved hyperparameters lost
+    alone.mkdir()
+    for name in ("config.json", "last.dat"):
+        (alone / name).write_bytes((run_dir / name).read_bytes())
     base = ("--environment", "CartPole-v1")
     for argv, message in [
-        ((*base, "--path_weights", weights), "these weights were trained with --reservoir_evolve: pass the run's "
+        ((*base, "--path_weights", alone / "last.dat"), "these weights were trained with --reservoir_evolve: pass the run's "
                                              "evolved reservoir hyperparameters too, --path_reservoir"),
         ((*base, "--path_weights", outside, "--reservoir"), "--reservoir needs --reservoir_seed"),
         ((*base, "--path_weights", outside, "--reservoir_seed", "5"), "--reservoir_seed has an effect only with "
@@ -348,16 +351,14 @@ def test_the_comparison_runner_trains_evaluates_and_tabulates(tmp_path):
     assert code == 0 and (tmp_path / "results.md").read_text() == before and "evaluate_" not in output
 
 
-def test_reservoir_alone_on_evaluation_takes_the_rest_from_the_run_folder(trained, tmp_path):
+def test_evaluation_takes_the_reservoir_and_its_evolved_file_from_the_run_folder(trained, tmp_path):
     run_dir, output = trained["hebbian, given reservoir"]
     printed = shlex.split(output.strip().splitlines()[-1].split("evaluate with: ", 1)[1])[2:]
     printed = printed[:printed.index("--episodes")]
     returns = evaluated_returns(evaluate_hebb.main, *printed, json_path=tmp_path / "printed.json")
-    bare = [word for index, word in enumerate(printed) if not word.startswith("--reservoir_")
-            and not printed[index - 1].startswith("--reservoir_")]  # --reservoir, units, lr, sr and seed left out
-    assert "--reservoir" in bare
-    assert evaluated_returns(evaluate_hebb.main, *bare, json_path=tmp_path / "bare.json") == returns
+    assert evaluated_returns(evaluate_hebb.main, *printed, "--reservoir", json_path=tmp_path / "bare.json") == returns
     evolved_dir, _ = trained["static, evolved reservoir"]
-    code, output = run(evaluate_static.main, "--environment", "CartPole-v1", "--path_weights", evolved_dir / "last.dat",
-                       "--reservoir")
-    assert code == 2 and "pass the run's evolved reservoir hyperparameters too, --path_reservoir" in output
+    beside = evaluated_returns(evaluate_static.main, "--path_weights", evolved_dir / "last.dat",
+                               json_path=tmp_path / "beside.json")
+    assert evaluated_returns(evaluate_static.main, "--path_weights", evolved_dir / "last.dat", "--path_reservoir",
+                             evolved_dir / "last_reservoir.dat", json_path=tmp_path / "given.json") == beside
