@@ -29,6 +29,7 @@ import envs
 from cli.errors import USER_ERRORS, Parser, UserError, explained
 from cli.errors import say as log
 from cli.flags import flag_value, positive_float, positive_int, seed_value
+from cli.hints import command  # hints by the interpreter and the script's absolute path: they work from any folder
 from es.files import atomic_write_text, write_json
 from reservoirs import SEARCH_BOUNDS, experiments
 from reservoirs.esn import ReservoirSettings
@@ -184,12 +185,12 @@ def evolve_one_env(prog: str, args: argparse.Namespace, several: bool) -> int:
                      args.del_obs)
     if several:
         name = study_name(args.env_id, nb_res, args.h_test, training_steps=args.training_steps)
-        test = (f"python scripts/test_multi_res.py --env_id {args.env_id} --h_test {args.h_test} --nb_res {nb_res} "
-                f"--HP_training_steps {args.training_steps}")
+        test = command("scripts/test_multi_res.py", "--env_id", args.env_id, "--h_test", args.h_test, "--nb_res",
+                       nb_res, "--HP_training_steps", args.training_steps)
     else:
         name = study_name(args.env_id, args.h_test, training_steps=args.training_steps)
-        test = (f"python scripts/test.py --env_id {args.env_id} --h_test {args.h_test} --HP_training_steps "
-                f"{args.training_steps}")
+        test = command("scripts/test.py", "--env_id", args.env_id, "--h_test", args.h_test, "--HP_training_steps",
+                       args.training_steps)
     return evolve(prog, args, name, (env_id,), space, loop, None,
                   search_settings(args, space, env=args.env_id, del_obs=args.del_obs), test)
 
@@ -209,8 +210,8 @@ def evolve_generalization(prog: str, args: argparse.Namespace) -> int:
     space = search_space(args, args.nb_res, suffixed=True)
     loop = InnerLoop(PPOFrontEnd(args.skip_c, args.zero_action), args.training_steps, args.nb_seeds, args.ep_eval)
     name = study_name(args.env_type, args.nb_res, args.h_test, training_steps=args.training_steps)
-    test = (f"python scripts/test_generalization.py --env_id <an unseen id> --HP_env_type {args.env_type} "
-            f"--h_test {args.h_test} --nb_res {args.nb_res} --HP_training_steps {args.training_steps}")
+    test = command("scripts/test_generalization.py", "--env_id", "<an unseen id>", "--HP_env_type", args.env_type,
+                   "--h_test", args.h_test, "--nb_res", args.nb_res, "--HP_training_steps", args.training_steps)
     settings = search_settings(args, space, env=args.env_type, random_baseline=args.random_baseline)
     return evolve(prog, args, name, env_ids, space, loop, args.random_baseline, settings, test)
 
@@ -351,22 +352,23 @@ def test_models(args: argparse.Namespace, name: str, evolve_hint: str, several: 
 
 def test(prog: str, args: argparse.Namespace) -> int:
     name = study_name(args.env_id, args.h_test, training_steps=args.HP_training_steps)
-    hint = (f"python scripts/evolve_res.py --env_id {args.env_id} --h_test {args.h_test} --training_steps "
-            f"{args.HP_training_steps} --nb_trials N --sampler Cmaes")
+    hint = command("scripts/evolve_res.py", "--env_id", args.env_id, "--h_test", args.h_test, "--training_steps",
+                   args.HP_training_steps, "--nb_trials", "N", "--sampler", "Cmaes")
     return test_models(args, name, hint, False, 1, True, MODELS_TEST)
 
 
 def test_multi_res(prog: str, args: argparse.Namespace) -> int:
     name = study_name(args.env_id, args.nb_res, args.h_test, training_steps=args.HP_training_steps)
-    hint = (f"python scripts/evolve_multi_res.py --env_id {args.env_id} --h_test {args.h_test} --nb_res "
-            f"{args.nb_res} --training_steps {args.HP_training_steps} --nb_trials N")
+    hint = command("scripts/evolve_multi_res.py", "--env_id", args.env_id, "--h_test", args.h_test, "--nb_res",
+                   args.nb_res, "--training_steps", args.HP_training_steps, "--nb_trials", "N")
     return test_models(args, name, hint, True, args.nb_res, False, MODELS_DEL_OBS)  # always the four models
 
 
 def test_generalization(prog: str, args: argparse.Namespace) -> int:
     name = study_name(args.HP_env_type, args.nb_res, args.h_test, training_steps=args.HP_training_steps)
-    hint = (f"python scripts/evolve_generalization.py --env_type {args.HP_env_type} --h_test {args.h_test} "
-            f"--nb_res {args.nb_res} --training_steps {args.HP_training_steps} --nb_trials N --sampler Cmaes")
+    hint = command("scripts/evolve_generalization.py", "--env_type", args.HP_env_type, "--h_test", args.h_test,
+                   "--nb_res", args.nb_res, "--training_steps", args.HP_training_steps, "--nb_trials", "N",
+                   "--sampler", "Cmaes")
     return test_models(args, name, hint, True, args.nb_res, False, MODELS_GENERALIZATION)
 
 

@@ -27,6 +27,8 @@ from pathlib import Path
 
 import pytest
 
+from cli.hints import command
+
 ROOT = Path(__file__).resolve().parent.parent
 ENV = {**os.environ, "SDL_VIDEODRIVER": "dummy", "MUJOCO_GL": "egl", "PYTHONUNBUFFERED": "1"}
 STEPS = "2048"
@@ -108,7 +110,7 @@ def test_study_resumes_from_its_journal(evolved):
     assert after_four[:2] == after_two
     assert all(set(params) == {"sr", "lr"} for _, params, _ in after_four)  # --fixed_iss True: iss is 1.0
     assert len({params["sr"] for _, params, _ in after_four}) == 4  # the resumed sampler draws new points
-    assert "trial 1 | fitness" in first[1] and "test it with: python scripts/test.py --env_id CartPole-v1" in first[1]
+    assert "trial 1 | fitness" in first[1] and f"test it with: {command('scripts/test.py', '--env_id', 'CartPole-v1')}" in first[1]
 
 
 def test_same_seeds_same_trials_and_returns(evolved, tmp_path):
