@@ -39,7 +39,7 @@ from settings import SEED_RANGE, unmet_requirement
 
 COEV_ROLES = (  # --path_coev's
     "coevolved_initial_weights", "CNN_parameters")
-FROM_RUN = "; with a file of a run folder, what its config.json records"
+FROM_RUN = "the run's, from the config.json beside the weights; else"
 
 
 def evaluation_parser(prog: str, description: str, kind: str) -> Parser:

@@ -26,15 +26,15 @@ def converter(item: Option):
     return base if base in (int, float) else None
 
 
-def help_text(item: Option, default=None) -> str:
-    """The help, with the default said once (flags that are off by default say nothing more)."""
+def help_text(item: Option, default=None, note: str = "") -> str:
+    """The help, with the default said once (flags that are off by default say nothing more), and ``note``."""
     shown = item.spec.shown_default or (default if default is not None else item.default)
     text = item.spec.help
     if item.choices is not None and item.spec.metavar:  # argparse lists them only without a metavar
         text = f"{text}: {', '.join(map(str, item.choices))}"
     if item.base_type() is bool or shown is None:
-        return text
-    return f"{text} (default: {shown})"
+        return f"{text} (default: {note}, off)" if note else text
+    return f"{text} (default: {note + ', ' if note else ''}{shown})"
 
 
 HELP_ORDER = ("env", "es", "run", "policy")  # --help as the original's: the environment first
@@ -57,9 +57,7 @@ def add_settings(parser: argparse.ArgumentParser, script: str, kind: str, defaul
         if group not in groups:
             groups[group] = parser.add_argument_group(group)
         add = groups[group].add_argument
-        text = help_text(item, (defaults or {}).get(item.name))
-        if evaluation_note and item.spec.evaluation:
-            text = f"{text}{evaluation_note}"
+        text = help_text(item, (defaults or {}).get(item.name), evaluation_note if item.spec.evaluation else "")
         common = {"dest": item.name, "default": argparse.SUPPRESS, "help": text}
         if item.base_type() is bool and item.spec.parse is None:
             add(f"--{item.flag}", action="store_true", **common)

@@ -27,7 +27,7 @@ from es.settings import ESSettings
 from report import tensorboard
 from report.log import FitnessPlot, GenerationLog
 from report.progress import display_for
-from settings import unmet_requirement
+from settings import type_problem, unmet_requirement
 
 EXIT_CODES = {Status.DONE: 0, Status.FAILED: 1, Status.INTERRUPTED: 130}
 
@@ -115,9 +115,13 @@ def experiment_values(path: str, kind: str) -> dict:
     if found != kind:
         raise UserError(f"{source} is a {found} experiment; run it with {TRAIN_SCRIPTS.get(found, 'its script')}")
     try:
-        return section_values(sections, source, kind=kind)
+        values = section_values(sections, source, kind=kind)
     except ValueError as error:
         raise UserError(str(error)) from None
+    for item in declared():  # each value of the file, also those a flag overrides
+        if item.name in values and (problem := type_problem(item, values[item.name])) is not None:
+            raise UserError(f"{source}: {problem}")
+    return values
 
 
 def config_for_resume(kind: str, args: argparse.Namespace) -> tuple[TrainConfig, RunFolder]:

@@ -11,8 +11,10 @@ from settings import check, setting
 @dataclass(frozen=True)
 class EnvSettings:
     environment: str = setting("CarRacing-v0", nonempty=True, metavar="ID", scripts=("train", "evaluate"),
+                               evaluation=True,  # the evaluate scripts' default, and theirs to change
                                help="Gymnasium, pyBullet or MuJoCo id, or module:Id for a custom environment; several "
-                                    "ids separated by commas are trained together (fitness = mean over them)")
+                                    "ids separated by commas: trained together (fitness = mean over them), evaluated "
+                                    "one row each")
     # the registered ids made (resolved when a run starts); fitness: their mean
     env_ids: tuple[str, ...] = setting((), flag=None, derived=True, help="the ids --environment resolves to")
     recipe_modules: tuple[str, ...] = setting((), flag=None, derived=True,
