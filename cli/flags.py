@@ -26,15 +26,21 @@ def converter(item: Option):
     return base if base in (int, float) else None
 
 
-def help_text(item: Option, default=None, note: str = "") -> str:
-    """The help, with the default said once (flags that are off by default say nothing more), and ``note``."""
+def shown_default(item: Option, default=None, note: str = "") -> str:
+    """The default as --help says it ("" for a flag that is off by default), after ``note`` if any."""
     shown = item.spec.shown_default or (default if default is not None else item.default)
+    shown = "off" if item.base_type() is bool or shown is None else str(shown)
+    if shown == "off" and not note:
+        return ""
+    return f"{note}, {shown}" if note else shown
+
+
+def help_text(item: Option, default: str) -> str:
+    """The help, with the default said once."""
     text = item.spec.help
     if item.choices is not None and item.spec.metavar:  # argparse lists them only without a metavar
         text = f"{text}: {', '.join(map(str, item.choices))}"
-    if item.base_type() is bool or shown is None:
-        return f"{text} (default: {note}, off)" if note else text
-    return f"{text} (default: {note + ', ' if note else ''}{shown})"
+    return f"{text} (default: {default})" if default else text
 
 
 HELP_ORDER = ("env", "es", "run", "policy")  # --help as the original's: the environment first
@@ -57,12 +63,15 @@ def add_settings(parser: argparse.ArgumentParser, script: str, kind: str, defaul
         if group not in groups:
             groups[group] = parser.add_argument_group(group)
         add = groups[group].add_argument
-        text = help_text(item, (defaults or {}).get(item.name), evaluation_note if item.spec.evaluation else "")
+        default = shown_default(item, (defaults or {}).get(item.name), evaluation_note if item.spec.evaluation else "")
+        text = help_text(item, default)
         common = {"dest": item.name, "default": argparse.SUPPRESS, "help": text}
         if item.base_type() is bool and item.spec.parse is None:
-            add(f"--{item.flag}", action="store_true", **common)
+            action = add(f"--{item.flag}", action="store_true", **common)
         else:
-            add(f"--{item.flag}", type=converter(item), choices=item.choices, metavar=item.spec.metavar, **common)
+            action = add(f"--{item.flag}", type=converter(item), choices=item.choices, metavar=item.spec.metavar,
+                         **common)
+        action.shown_default = default  # for flag_table: argparse's is SUPPRESS
         for alias, value in item.spec.aliases.items():
             add(f"--{alias}", dest=item.name, action="store_const", const=value, default=argparse.SUPPRESS,
                 help=f"the same as --{item.flag} {value}")
@@ -86,7 +95,8 @@ def flag_table(parser: argparse.ArgumentParser) -> list[tuple[str, str, str]]:
     for action in parser._actions:
         if not action.option_strings or action.help == argparse.SUPPRESS:
             continue
-        default = "" if action.default in (None, False, argparse.SUPPRESS) else str(action.default)
+        plain = "" if action.default in (None, False, argparse.SUPPRESS) else str(action.default)
+        default = getattr(action, "shown_default", plain)
         rows.append((", ".join(action.option_strings), default, action.help or ""))
     return rows
 

@@ -137,9 +137,9 @@ def test_a_config_json_edited_by_hand_is_refused_and_nothing_changes(tmp_path, e
     config = json.loads((run_dir / "config.json").read_text())
     (run_dir / "config.json").write_text(json.dumps(edit(config)))
     before = digest(run_dir)
-    code, out, err = main(train_static, "--resume", run_dir, "--generations", 3)
+    code, _, err = main(train_static, "--resume", run_dir, "--generations", 3)
     one_line(code, err, named)
-    code, out, err = main(evaluate_static, "--path_weights", run_dir / "last.dat")
+    code, _, err = main(evaluate_static, "--path_weights", run_dir / "last.dat")
     one_line(code, err, named)
     assert digest(run_dir) == before
 
@@ -159,14 +159,14 @@ def test_a_config_json_records_the_settings_of_its_kind_and_reads_back_the_same(
 
 def test_a_flag_that_contradicts_the_run_is_refused_naming_both_values(tmp_path):
     run_dir = copy_run("hebbian", tmp_path)
-    code, out, err = main(evaluate_hebb, "--path_hebb", run_dir / "last_coeffs.dat", "--hebb_rule", "ABCD_lr",
+    code, _, err = main(evaluate_hebb, "--path_hebb", run_dir / "last_coeffs.dat", "--hebb_rule", "ABCD_lr",
                           "--init_weights", "normal")
     one_line(code, err, "--hebb_rule ABCD_lr (the run has A)", "leave the flags out")
     assert "--init_weights" not in err  # given, but the value the run has
-    code, out, err = main(evaluate_hebb, "--path_hebb", run_dir / "last_coeffs.dat", "--path_coev",
+    code, _, err = main(evaluate_hebb, "--path_hebb", run_dir / "last_coeffs.dat", "--path_coev",
                           run_dir / "last_coeffs.dat")
     one_line(code, err, "--path_coev", "this policy has no such file")
-    code, out, err = main(evaluate_static, "--path_weights", run_dir / "last_coeffs.dat")
+    code, _, err = main(evaluate_static, "--path_weights", run_dir / "last_coeffs.dat")
     one_line(code, err, "is from a hebbian run", "evaluate_hebb.py")
 
 
@@ -191,16 +191,16 @@ def test_an_experiment_file_key_the_script_does_not_take_is_refused(tmp_path, mo
     (tmp_path / "x.toml").write_text(toml + "\n")
     monkeypatch.chdir(tmp_path)  # where a run would go if the file's folder were taken
     folder = [] if "folder" in toml else ["--folder", tmp_path / "runs"]
-    code, out, err = main(script, "--environment", "CartPole-v1", "--generations", 1, "--popsize", 4, "--config",
+    code, _, err = main(script, "--environment", "CartPole-v1", "--generations", 1, "--popsize", 4, "--config",
                           tmp_path / "x.toml", *folder)
     one_line(code, err, named)
     assert sorted(path.name for path in tmp_path.iterdir()) == ["x.toml"]
 
 
 def test_a_setting_of_another_kind_is_not_a_flag_of_the_script(tmp_path):
-    code, out, err = main(train_static, "--environment", "CartPole-v1", "--hebb_rule", "A", "--folder", tmp_path)
+    code, _, err = main(train_static, "--environment", "CartPole-v1", "--hebb_rule", "A", "--folder", tmp_path)
     one_line(code, err, "unrecognized arguments: --hebb_rule")
-    code, out, err = main(evaluate_hebb, "--path_hebb", "x.dat", "--network", "small")
+    code, _, err = main(evaluate_hebb, "--path_hebb", "x.dat", "--network", "small")
     one_line(code, err, "unrecognized arguments: --network")
 
 
@@ -238,9 +238,9 @@ def test_resumable_and_requires_come_from_the_declarations(tmp_path):
     resumable = {item.name for item in declared() if item.spec.resumable}
     assert resumable == {"generations", "threads", "backend", "ray_address", "print_every", "tensorboard"}
     run_dir = copy_run("static", tmp_path)
-    code, out, err = main(train_static, "--resume", run_dir, "--lr", "0.3", "--generations", 3)
+    code, _, err = main(train_static, "--resume", run_dir, "--lr", "0.3", "--generations", 3)
     one_line(code, err, "--lr 0.3 (the run has 0.2)", "only --generations, --print_every, --threads")
-    code, out, err = main(train_static, "--environment", "CartPole-v1", "--reservoir_units", "5", "--folder", tmp_path)
+    code, _, err = main(train_static, "--environment", "CartPole-v1", "--reservoir_units", "5", "--folder", tmp_path)
     one_line(code, err, "--reservoir_units has an effect only with --reservoir")
 
 
