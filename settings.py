@@ -126,10 +126,6 @@ def _options(cls: type) -> tuple[Option, ...]:
                  for item in dataclasses.fields(cls))
 
 
-def option(settings, name: str) -> Option:
-    return next(item for item in options(settings) if item.name == name)
-
-
 # --- checks -------------------------------------------------------------------------------------------
 
 

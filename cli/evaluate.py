@@ -206,8 +206,6 @@ def evaluation_config(kind: str, args: argparse.Namespace, weight_file: Path,
                         "these; leave the flags out, or give the run's values") from None
     except ValueError as error:
         raise UserError(str(error)) from None
-    if recorded is not None:
-        say(f"settings: as {weight_file.parent / 'config.json'} records them")
     obs_norm = statistics is not None or config.policy.obs_norm
     clip = statistics.clip if statistics is not None else config.policy.obs_clip
     return replace(config, policy=replace(config.policy, obs_norm=obs_norm, obs_clip=clip if obs_norm else None))
@@ -291,6 +289,8 @@ def evaluate_main(kind: str, parser: Parser, argv: list[str] | None = None) -> i
         arrays = weight_arrays(args, weight_file, first, problem.policy, config.policy)
         with explained("cannot load the weights"):
             params = problem.policy.load(arrays)
+        if (weight_file.parent / "config.json").is_file():
+            say(f"settings: as {weight_file.parent / 'config.json'} records them")
         describe_reservoir(problem, params)
         if args.video:
             recorder = record_first_episode(problem, args.video)
