@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 
 from envs import EnvSettings
+from tests.extras import need
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -65,7 +66,7 @@ def test_a_namespaced_id_trains_and_evaluates_through_the_printed_hint_in_anothe
 
 
 def test_a_namespaced_atari_id_trains(tmp_path):
-    pytest.importorskip("ale_py", reason="needs the atari extra: pip install -r requirements-atari.txt")
+    need("atari")
     trained = subprocess.run(
         [sys.executable, str(ROOT / "train_static.py"), "--environment", "ALE/Pong-v5", "--popsize", "2",
          "--generations", "1", "--threads", "1", "--seed", "1", "--max_episode_steps", "5", "--folder", "runs"],

@@ -27,6 +27,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.extras import need
+
 ROOT = Path(__file__).resolve().parent.parent
 ENV = {**os.environ, "SDL_VIDEODRIVER": "dummy", "MUJOCO_GL": "egl", "PYTHONUNBUFFERED": "1"}
 STEPS = "2048"
@@ -36,8 +38,7 @@ CARTPOLE_JOURNAL = "optuna-journal_CartPole-v1_t_2k_steps.log"
 
 
 def extra():
-    pytest.importorskip("optuna", reason="the ER-MRL extra is optional: pip install -r requirements-reservoirs.txt")
-    pytest.importorskip("stable_baselines3", reason="the ER-MRL extra is optional")
+    need("reservoirs")
     import optuna
 
     return optuna
