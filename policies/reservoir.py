@@ -7,7 +7,7 @@ reservoir's state; here the head this tool evolves, static (Salimans et al. 2017
 
 - **The reservoir** is ER-MRL's: the leaky integrator
   x[t+1] = (1 - lr) x[t] + lr tanh(W_in u[t+1] + W x[t] + b), W, W_in and b drawn as reservoirpy 0.3
-  drew them (``reservoirs.esn.ReservoirMatrices``), so a given (units, lr, sr, iss, seed) is the very
+  drew them (``policies.reservoir_matrices``), so a given (units, lr, sr, iss, seed) is the very
   reservoir ER-MRL's scripts build. The state starts at zero at every episode (``reset``); the draws
   are fixed for the run, from ``PolicySettings.reservoir_seed`` (the run's seed unless given), so every
   worker, and a resumed run, regenerates the same matrices from one integer: nothing but the seed
@@ -52,7 +52,7 @@ from numba import njit
 from policies.base import Policy
 from policies.network import Layout, NetworkSpec
 from policies.static import check_length
-from reservoirs import SEARCH_BOUNDS
+from reservoir_extra import SEARCH_BOUNDS
 
 ROLE = "reservoir"  # the file role (and layout part) of the evolved hyperparameters
 # ER-MRL's default search bounds, in the order of the genes
@@ -156,7 +156,7 @@ class ReservoirFrontEnd:
 
     def __init__(self, head: Policy, input_dim: int, units: int, values: Hyperparameters, seed: int,
                  evolve: bool = False):
-        from reservoirs.esn import ReservoirMatrices  # reservoirpy: the caller has checked it is installed
+        from policies.reservoir_matrices import ReservoirMatrices  # reservoirpy: the caller has checked it is there
 
         self.head, self.units, self.values, self.evolve = head, units, values, evolve  # checked by PolicySettings
         self.net = head.net  # the network the evolved weights define (the adaptation plot's layers)
