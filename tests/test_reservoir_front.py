@@ -152,7 +152,7 @@ def test_genes_map_into_er_mrls_bounds_monotonically_and_start_at_the_given_valu
 
 def test_evolved_genes_are_the_last_parameters_outside_the_l2_penalty():
     policy = front_end(evolve=True, reservoir_lr=0.5)
-    head = front_end().head
+    head = front_end().inner
     assert policy.num_params == head.num_params + 3 and policy.penalised == slice(0, head.num_params)
     assert list(policy.layout.describe()) == ["fc1", "fc2", "fc3", "reservoir"]
     assert policy.layout.describe()["fc1"] == [128, UNITS]
