@@ -115,7 +115,7 @@ def test_with_obs_norm_the_reservoir_reads_the_normalised_observation():
     state, states = policy.reset(params, rng), []
     for observation in observations:
         _, state = policy.act(params, state, observation)
-        states.append(state.state.copy())
+        states.append(state.inner.state.copy())  # the reservoir behind the normalisation
     normalised = np.clip((observations - mean) / std, -1.5, 1.5).astype(np.float32).astype(np.float64)
     expected = plain_loop(*rebuilt(Hyperparameters(0.3, 1.0, 1.0)), 0.3, normalised)
     np.testing.assert_allclose(np.array(states), expected, rtol=1e-12, atol=1e-14)
