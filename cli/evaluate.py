@@ -234,12 +234,9 @@ def weight_arrays(args: argparse.Namespace, weight_file: Path, first: np.ndarray
 
 
 def describe_reservoir(problem, params) -> None:
-    """One line: the reservoir the weights are evaluated with (evolved hyperparameters decoded)."""
-    settings = problem.spec.policy
-    if settings.reservoir:
-        evolved = " (evolved)" if settings.reservoir_evolve else ""
-        say(f"reservoir: {settings.reservoir_units} units, seed {settings.reservoir_seed}, "
-            f"{problem.policy.hyperparameters(params).describe()}{evolved}")
+    """One line for each front end the weights are evaluated with (a reservoir's evolved hyperparameters decoded)."""
+    for line in problem.policy.describe_front_ends(params):
+        say(line)
 
 
 def normalise_observations(problem, weight_file: Path, statistics: SavedStatistics | None) -> None:

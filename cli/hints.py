@@ -33,14 +33,16 @@ def script_path(name: str) -> str:
 
 
 def command(script: str, *words: object) -> str:
-    return shlex.join([sys.executable or "python", script_path(script), *map(str, words)])
+    """The project's script ``script`` with ``words``, runnable from any folder (paths: absolute)."""
+    return shlex.join([sys.executable or "python", script_path(script),
+                       *(str(word.absolute()) if isinstance(word, Path) else str(word) for word in words)])
 
 
 def resume_hint(config: TrainConfig, run_dir: Path) -> str:
-    return command(TRAIN_SCRIPTS[config.policy.kind], "--resume", run_dir)
+    return command(TRAIN_SCRIPTS[config.policy.kind], "--resume", Path(run_dir))
 
 
 def evaluate_hint(config: TrainConfig, weight_file: Path) -> str:
     """The command that evaluates a run's weight file (the rest comes from its folder) over 10 episodes."""
     kind = config.policy.kind
-    return command(EVALUATE_SCRIPTS[kind], EVALUATE_FLAGS[MAIN_ROLE[kind]], weight_file, "--episodes", 10)
+    return command(EVALUATE_SCRIPTS[kind], EVALUATE_FLAGS[MAIN_ROLE[kind]], Path(weight_file), "--episodes", 10)

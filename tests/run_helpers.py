@@ -76,7 +76,8 @@ class Training:
 
 
 def hint(script: str, *words) -> str:
-    """A command as the scripts print it: this interpreter, the script's absolute path, shell-quoted words."""
+    """A command as the scripts print it: this interpreter, the script by its absolute path, shell-quoted
+    words."""
     return shlex.join([sys.executable, str(ROOT / script), *map(str, words)])
 
 
