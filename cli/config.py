@@ -120,7 +120,7 @@ def section_values(sections: dict, source: str, kind: str | None = None, recorde
     for name, settings in SECTIONS.items():
         entries = sections.get(name, {})
         if not isinstance(entries, dict):
-            raise ValueError(f"{source}: [{name}] must be a table of settings")  # noqa: TRY004 (a user error)
+            raise ValueError(f"{source}: [{name}] must be a table of settings")
         known = {item.name: item for item in options(settings)}
         for key, value in entries.items():
             item = known.get(key)

@@ -49,7 +49,8 @@ def evaluation_parser(prog: str, description: str, kind: str) -> Parser:
     add = parser.add_argument
     main = EVALUATE_FLAGS[MAIN_ROLE[kind]]
     if kind == "static":
-        add(main, required=True, metavar="FILE", help="the .dat file of evolved weights, or a run folder (its last.dat)")
+        add(main, required=True, metavar="FILE",
+            help="the .dat file of evolved weights, or a run folder (its last.dat)")
     else:
         add(main, required=True, metavar="FILE",
             help="the .dat file of Hebbian coefficients, or a run folder (its last_coeffs.dat)")

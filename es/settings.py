@@ -103,7 +103,8 @@ class RunSettings:
     print_every: int = setting(1, low=1, metavar="K", resumable=True, help="save files every K generations")
     folder: str = setting("weights", nonempty=True, metavar="DIR", help="where run folders are created")
     threads: int = setting(-1, rule=(_threads, "-1 (all cores) or a whole number >= 1"), metavar="W", resumable=True,
-                           parse=original_threads, help="worker processes; -1 = all cores, 1 = run in this process (0 and other negative "
+                           parse=original_threads,
+                           help="worker processes; -1 = all cores, 1 = run in this process (0 and other negative "
                                 "values too, as the original)")
     seed: int = setting(0, low=SEED_RANGE[0], high=SEED_RANGE[1], shown_default="a random one, printed and saved",
                         help="seed of the run")

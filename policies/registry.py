@@ -55,9 +55,11 @@ class PolicySettings:
 
     kind: str = setting("static", flag=None, choices=lambda: KINDS, evaluation=True,
                         help="the policy kind: the script's (train_static.py, train_hebb.py)")
-    hebb_rule: str = setting("ABCD_lr", choices=RULES, metavar="RULE", applies=("hebbian",), scripts=EVALUATED, evaluation=True,
+    hebb_rule: str = setting("ABCD_lr", choices=RULES, metavar="RULE", applies=("hebbian",), scripts=EVALUATED,
+                             evaluation=True,
                              help="Hebbian rule (the one the coefficients were evolved for)")
-    init_weights: str = setting("uni", choices=INIT_CHOICES, metavar="INIT", applies=("hebbian",), scripts=EVALUATED, evaluation=True,
+    init_weights: str = setting("uni", choices=INIT_CHOICES, metavar="INIT", applies=("hebbian",), scripts=EVALUATED,
+                                evaluation=True,
                                 help="initial weights of every episode (coevolve: evolved with the rules)")
     distribution: str = setting("normal", choices=DISTRIBUTIONS, applies=("hebbian",),
                                 help="generation-0 coefficients (and CNN / co-evolved weights): normal N(0,1) or "

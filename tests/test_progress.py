@@ -106,7 +106,8 @@ def test_output_that_is_not_a_terminal_is_one_line_per_generation(piped_run):
     run_dir, lines = piped_run
     assert lines[0].startswith(f"run folder: {run_dir} | ")
     assert [line.split(" | ")[0] for line in lines[1:-1]] == ["iter 1", "iter 2", "iter 3"]
-    assert lines[-1] == f"done; evaluate with: {hint('evaluate_static.py', '--path_weights', run_dir / 'last.dat', '--episodes', 10)}"
+    evaluate = hint("evaluate_static.py", "--path_weights", run_dir / "last.dat", "--episodes", 10)
+    assert lines[-1] == f"done; evaluate with: {evaluate}"
     assert not any("\r" in line for line in lines)
 
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import shlex
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -288,8 +287,9 @@ def test_bad_evaluation_input_is_one_line(trained, tmp_path):
         (alone / name).write_bytes((run_dir / name).read_bytes())
     base = ("--environment", "CartPole-v1")
     for argv, message in [
-        ((*base, "--path_weights", alone / "last.dat"), "these weights were trained with --reservoir_evolve: pass the run's "
-                                             "evolved reservoir hyperparameters too, --path_reservoir"),
+        ((*base, "--path_weights", alone / "last.dat"),
+         "these weights were trained with --reservoir_evolve: pass the run's evolved reservoir hyperparameters too, "
+         "--path_reservoir"),
         ((*base, "--path_weights", outside, "--reservoir"), "--reservoir needs --reservoir_seed"),
         ((*base, "--path_weights", outside, "--reservoir_seed", "5"), "--reservoir_seed has an effect only with "
                                                                       "--reservoir"),

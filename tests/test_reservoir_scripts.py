@@ -110,7 +110,8 @@ def test_study_resumes_from_its_journal(evolved):
     assert after_four[:2] == after_two
     assert all(set(params) == {"sr", "lr"} for _, params, _ in after_four)  # --fixed_iss True: iss is 1.0
     assert len({params["sr"] for _, params, _ in after_four}) == 4  # the resumed sampler draws new points
-    assert "trial 1 | fitness" in first[1] and f"test it with: {command('scripts/test.py', '--env_id', 'CartPole-v1')}" in first[1]
+    assert "trial 1 | fitness" in first[1]
+    assert f"test it with: {command('scripts/test.py', '--env_id', 'CartPole-v1')}" in first[1]
 
 
 def test_same_seeds_same_trials_and_returns(evolved, tmp_path):
