@@ -22,13 +22,17 @@ import contextlib
 import glob
 import importlib.util
 import io
-import multiprocessing
+import json
 import os
 import re
 import runpy
+import select
 import shlex
 import shutil
+import signal
+import subprocess
 import sys
+import time
 import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,6 +45,9 @@ SHELLS = ("bash", "sh", "shell", "console")
 DIRECTIVE = re.compile(r"<!-- (not run|files): (.*?) -->")
 PYTHONS = ("python", "python3")
 TIMEOUT = 300
+# what the scripts import, loaded once by the server that starts them (a module missing here is left out)
+PRELOAD = ("torch", "numba", "scipy", "gymnasium", "pygame", "Box2D", "mujoco", "pybullet", "matplotlib.figure",
+           "matplotlib.backends.backend_agg", "matplotlib.font_manager", "cli", "envs", "es", "policies", "report")
 
 spec = importlib.util.spec_from_file_location("docs_generate", ROOT / "docs" / "generate.py")
 generate = importlib.util.module_from_spec(spec)
@@ -258,25 +265,54 @@ def run_script(argv: list[str], cwd: str, log: str) -> None:
         os._exit(code)
 
 
+def serve() -> None:
+    """The launcher's server (``python tests/test_docs.py``): import what the scripts import, then for each
+    request line ``[argv, cwd, log]`` fork a process that runs it; answer its pid, then its exit code."""
+    sys.path.insert(0, str(ROOT))
+    for module in PRELOAD:
+        with contextlib.suppress(ImportError):
+            importlib.import_module(module)
+    while line := sys.stdin.readline():
+        argv, cwd, log = json.loads(line)
+        pid = os.fork()
+        if pid == 0:
+            os.setpgid(0, 0)  # its own process group, which a timeout ends whole
+            run_script(argv, cwd, log)
+        print(pid, flush=True)
+        print(os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]), flush=True)
+
+
+def read_line(stream, timeout: float) -> str | None:
+    """A line from the server, unbuffered (so that select sees what is left), or None after ``timeout``."""
+    data, deadline = b"", time.monotonic() + timeout
+    while not data.endswith(b"\n"):
+        if not select.select([stream], [], [], max(0.0, deadline - time.monotonic()))[0]:
+            return None
+        chunk = os.read(stream.fileno(), 1)
+        assert chunk, "the launcher's server stopped"
+        data += chunk
+    return data.decode()
+
+
 @pytest.fixture(scope="session")
 def launcher():
-    """Start processes from a server that has imported what every script imports."""
-    context = multiprocessing.get_context("forkserver")
-    context.set_forkserver_preload([  # a module missing here is left out
-        "torch", "numba", "scipy", "gymnasium", "pygame", "Box2D", "mujoco", "pybullet", "matplotlib.figure",
-        "matplotlib.backends.backend_agg", "matplotlib.font_manager", "cli", "envs", "es", "policies", "report",
-        "test_docs"])
+    """Start commands from a server that has already imported what every script imports (a cold start
+    costs 5 to 10 s here, mostly torch and matplotlib)."""
+    server = subprocess.Popen([sys.executable, __file__], stdin=subprocess.PIPE, stdout=subprocess.PIPE, bufsize=0)
 
     def launch(argv: list[str], cwd: Path, log: Path) -> int:
-        process = context.Process(target=run_script, args=(argv, str(cwd), str(log)))
-        process.start()
-        process.join(TIMEOUT)
-        if process.is_alive():
-            process.kill()
-            process.join()
+        server.stdin.write((json.dumps([argv, str(cwd), str(log)]) + "\n").encode())
+        pid = int(read_line(server.stdout, TIMEOUT))
+        code = read_line(server.stdout, TIMEOUT)
+        if code is None:
+            os.killpg(pid, signal.SIGKILL)
+            read_line(server.stdout, TIMEOUT)
             pytest.fail(f"{shlex.join(argv)} ran longer than {TIMEOUT} s; output:\n{log.read_text()[-3000:]}")
-        return process.exitcode
-    return launch
+        return int(code)
+
+    yield launch
+    server.stdin.close()
+    server.wait(timeout=60)
 
 
 @dataclass
@@ -416,7 +452,8 @@ def run_or_known_failure(command: Command, folder: PageFolder, launch) -> None:
         run(command, folder, launch)
     except AssertionError as failure:
         if known:
-            pytest.xfail(f"{known[0]}: {str(failure).strip().splitlines()[-1]}")
+            errors = [line for line in str(failure).splitlines() if "error" in line] or [str(failure)]
+            pytest.xfail(f"{known[0]}: {errors[-1].strip()}")
         raise
 
 
@@ -481,3 +518,7 @@ def test_no_command_outside_a_code_block():
             fenced ^= line.startswith("```")
             assert fenced or not re.match(r" {4}(\.venv/bin/)?python3? \S+\.py", line), (
                 f"{page.relative_to(ROOT)}:{number}: a command in an indented block; fence it with ```bash")
+
+
+if __name__ == "__main__":
+    serve()
