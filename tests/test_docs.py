@@ -510,6 +510,25 @@ def test_flag_tables_match_the_parsers():
                 "run python docs/generate.py")
 
 
+def table_commands() -> list[tuple[str, list[str]]]:
+    """The commands of the pages' tables (a measured figure's, an original command line's): inline code
+    that runs one of this repository's scripts."""
+    found = []
+    for page in PAGES:
+        for number, line in enumerate(page.read_text().splitlines(), 1):
+            for span in re.findall(r"`((?:\.venv/bin/)?python3? [^`]+)`", line) if line.startswith("|") else []:
+                words = shlex.split(span)
+                if (ROOT / words[1]).is_file() and not re.search(r"\$|\.\.\.", span):  # not templates of SLURM lines
+                    found.append((f"{page.relative_to(ROOT)}:{number}", words))
+    return found
+
+
+@pytest.mark.parametrize(("where", "words"), table_commands(), ids=[where for where, _ in table_commands()])
+def test_table_command_parses(where, words):
+    """A command in a table is not run (those are measurements, or the original's lines), but it parses."""
+    check_parses(words[1], placeholders_as_values(words[2:]))
+
+
 def test_no_command_outside_a_code_block():
     """An indented block is a code block too, but the suite only reads fenced ones."""
     for page in PAGES:
