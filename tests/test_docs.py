@@ -42,7 +42,7 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 PAGES = [ROOT / "README.md", ROOT / "experiments" / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 SHELLS = ("bash", "sh", "shell", "console")
-DIRECTIVE = re.compile(r"<!-- (not run|files): (.*?) -->")
+DIRECTIVE = re.compile(r"<!-- (not run|files): (.*?) -->")  # a line of its own, just above a block
 PYTHONS = ("python", "python3")
 TIMEOUT = 300
 # what the scripts import, loaded once by the server that starts them (a module missing here is left out)
@@ -119,7 +119,7 @@ def page_commands(page: Path) -> list[Command]:
                 block.append(line)
         elif line.startswith("```"):
             block, start, language = [], number + 1, line[3:].strip()
-        elif match := DIRECTIVE.search(line):
+        elif match := DIRECTIVE.fullmatch(line.strip()):
             directives[match[1]] = match[2]
         elif line.strip():
             directives = {}
