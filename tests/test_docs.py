@@ -69,7 +69,6 @@ SHRINK = {"--generations": "1", "--popsize": "2", "--episodes": "1", "--eval_epi
 TRAIN_SCRIPTS = ("train_static.py", "train_hebb.py")
 EXPERIMENT_SCRIPTS = ("experiments/paper.py", "experiments/reservoir_front/compare.py")
 # documented commands that fail for a known reason being fixed elsewhere
-KNOWN_FAILURES = {"ALE/Pong-v5": "issue 18 item 4"}
 # what a page's folder must not link to: the outputs commands write
 OUTPUTS = {".git", ".venv", "runs", "weights", "heb_coeffs", "logs", "models", "__pycache__", ".pytest_cache"}
 
@@ -446,17 +445,6 @@ def run(command: Command, folder: PageFolder, launch) -> None:
     assert code == 0, f"{command.name}: {shlex.join([script_word, *args])} exited {code}:\n{log.read_text()[-3000:]}"
 
 
-def run_or_known_failure(command: Command, folder: PageFolder, launch) -> None:
-    known = [reason for text, reason in KNOWN_FAILURES.items() if any(text in word for word in command.words)]
-    try:
-        run(command, folder, launch)
-    except AssertionError as failure:
-        if known:
-            errors = [line for line in str(failure).splitlines() if "error" in line] or [str(failure)]
-            pytest.xfail(f"{known[0]}: {errors[-1].strip()}")
-        raise
-
-
 def run_in_order(command: Command, folders, launch) -> None:
     """Run the page's runnable commands above ``command`` that have not run yet, then ``command``."""
     folder = folders(command.page)
@@ -464,9 +452,9 @@ def run_in_order(command: Command, folders, launch) -> None:
         if earlier.not_run is not None or earlier.line in folder.done | set(folder.skipped):
             continue
         try:
-            run_or_known_failure(earlier, folder, launch)
+            run(earlier, folder, launch)
             folder.done.add(earlier.line)
-        except (pytest.skip.Exception, pytest.xfail.Exception) as skip:
+        except pytest.skip.Exception as skip:
             folder.skipped[earlier.line] = str(skip)
             if earlier is command:
                 raise
