@@ -75,6 +75,63 @@ def test_leaving_the_playfield_ends_with_minus_100_and_stepping_on_still_matches
     assert not unwrapped._draw_compiled(*unwrapped._camera())
 
 
+def track_driver(speed: float, ahead: int):
+    """Steers toward the track ``ahead`` tiles on from the nearest (backwards when negative) at ``speed``."""
+    def act(car_racing) -> np.ndarray:
+        car, track = car_racing.car, np.array([point[2:4] for point in car_racing.track])
+        x, y = car.hull.position
+        nearest = int(np.argmin(np.hypot(track[:, 0] - x, track[:, 1] - y)))
+        target_x, target_y = track[(nearest + ahead) % len(track)]
+        error = math.atan2(target_y - y, target_x - x) - (car.hull.angle + math.pi / 2)
+        error = (error + math.pi) % (2 * math.pi) - math.pi
+        velocity = float(np.hypot(*car.hull.linearVelocity))
+        return np.array([np.clip(-2 * error, -1, 1), 0.4 if velocity < speed else 0.0,
+                         0.3 if velocity > 1.3 * speed else 0.0], dtype=np.float32)
+    return act
+
+
+def assert_same_long_episode(seed: int, driver, steps: int, frame_every: int) -> tuple[int, float, dict]:
+    """Both classes for up to ``steps`` steps (no time limit), every observation and transition and
+    every ``frame_every``-th ``rgb_array`` frame equal; (steps run, return, last info)."""
+    stock, fast = pair("rgb_array", max_episode_steps=steps)
+    assert np.array_equal(stock.reset(seed=seed)[0], fast.reset(seed=seed)[0])
+    total = 0.0
+    for step in range(steps):
+        action = driver(stock.unwrapped, step)
+        expected, got = stock.step(action), fast.step(action)
+        assert np.array_equal(expected[0], got[0]), f"seed {seed}: observations differ at step {step}"
+        assert expected[1:] == got[1:], f"seed {seed}, step {step}: {expected[1:]} != {got[1:]}"
+        if step % frame_every == 0 or expected[2]:
+            assert np.array_equal(stock.render(), fast.render()), f"seed {seed}: frames differ at step {step}"
+        total += expected[1]
+        if expected[2] or expected[3]:
+            break
+    return step + 1, total, expected[4]
+
+
+def test_a_whole_lap_step_by_step():
+    """The zoom-in, then a lap driven along the track to its end (every tile visited): 1025 steps."""
+    follow = track_driver(45.0, 6)
+    steps, total, info = assert_same_long_episode(3, lambda env, step: follow(env), 1100, 50)
+    assert steps > 1000 and info == {"lap_finished": True} and total > 850
+
+
+def test_spinning_reversing_and_leaving_the_track_step_by_step():
+    """Spins on the spot, turns round and drives the track backwards, then off it onto the grass:
+    1100 steps."""
+    backwards = track_driver(30.0, -6)
+
+    def driver(env, step):
+        if step < 120:  # full throttle, full lock: the rear wheels spin and the car turns round
+            return np.array([1.0, 1.0, 0.0], dtype=np.float32)
+        if step < 800:
+            return backwards(env)
+        return np.array([0.3, 0.6, 0.0], dtype=np.float32)  # off the track, across the grass
+
+    steps, _, _ = assert_same_long_episode(4, driver, 1100, 50)
+    assert steps == 1100
+
+
 def test_hard_turns():
     turns = [np.array([1.0 if (step // 40) % 2 else -1.0, 0.4, 0.0], dtype=np.float32) for step in range(180)]
     transitions = assert_same_episode(12, turns)
