@@ -13,9 +13,9 @@ import argparse
 
 import numpy as np
 
-from cli.config import SECTIONS
+from cli.config import SECTIONS, declared
 from es.settings import original_threads as threads_value  # the ER-MRL and experiment scripts' too
-from settings import SEED_RANGE, Option, options
+from settings import SEED_RANGE, Option, expected, options, requirement
 
 
 def converter(item: Option):
@@ -36,10 +36,15 @@ def shown_default(item: Option, default=None, note: str = "") -> str:
 
 
 def help_text(item: Option, default: str) -> str:
-    """The help, with the default said once."""
+    """The help, then what the setting needs and its range, with the default said once."""
     text = item.spec.help
     if item.choices is not None and item.spec.metavar:  # argparse lists them only without a metavar
         text = f"{text}: {', '.join(map(str, item.choices))}"
+    found = requirement(item, declared())
+    if found is not None:
+        text = f"{text}; with {found[0]}"
+    if item.spec.low is not None:
+        text = f"{text}; {expected(item)}"
     return f"{text} (default: {default})" if default else text
 
 
@@ -71,10 +76,12 @@ def add_settings(parser: argparse.ArgumentParser, script: str, kind: str, defaul
         else:
             action = add(f"--{item.flag}", type=converter(item), choices=item.choices, metavar=item.spec.metavar,
                          **common)
-        action.shown_default = default  # for flag_table: argparse's is SUPPRESS
+        action.shown_default = default  # for the docs' tables: argparse's default is SUPPRESS
+        action.plain_help = help_text(item, "")  # the help without its default
         for alias, value in item.spec.aliases.items():
-            add(f"--{alias}", dest=item.name, action="store_const", const=value, default=argparse.SUPPRESS,
-                help=f"the same as --{item.flag} {value}")
+            alias_action = add(f"--{alias}", dest=item.name, action="store_const", const=value,
+                               default=argparse.SUPPRESS, help=f"the same as --{item.flag} {value}")
+            alias_action.shown_default, alias_action.plain_help = "", alias_action.help
 
 
 def given(args: argparse.Namespace) -> dict:

@@ -41,6 +41,8 @@ def cell(text: str) -> str:
 
 
 def default_text(action: argparse.Action) -> str:
+    if hasattr(action, "shown_default"):  # a setting's flag (cli.flags): argparse's default is SUPPRESS
+        return f"`{action.shown_default}`" if action.shown_default else "off"
     if action.required:
         return "required"
     if isinstance(action, (argparse._StoreTrueAction, argparse._StoreConstAction)) and not action.default:
@@ -53,7 +55,8 @@ def default_text(action: argparse.Action) -> str:
 
 
 def meaning(action: argparse.Action) -> str:
-    text = (action.help or "").replace("%(default)s", str(action.default)).replace("%%", "%")
+    text = getattr(action, "plain_help", action.help) or ""  # a setting's flag: the help without its default
+    text = text.replace("%(default)s", str(action.default)).replace("%%", "%")
     if action.choices is not None and not all(str(choice) in text for choice in action.choices):
         text += " (one of " + ", ".join(f"`{choice}`" for choice in action.choices) + ")"
     if isinstance(action, argparse._StoreConstAction) and action.dest != action.option_strings[0].lstrip("-"):
