@@ -5,7 +5,9 @@ Every constant the original hard-coded is a field here, with the original's valu
 (upstream spec §2.1, §9.1 item 7): the learning-rate floor, the sigma decay and floor, and the L2
 coefficient of the fitness penalty. The options beyond the original (the shaping, the optimiser,
 weight decay in the gradient, observation statistics, centre evaluation; OpenAI's es-starter and
-pytorch-es, spec §2.5 and §7.4) default to the original's behaviour. Fields are named as their
+pytorch-es, spec §2.5 and §7.4) default to the original's behaviour. The strategy (``--strategy``,
+``es.strategies``; default openai, the original's) and each strategy's settings are one block of
+fields, and ``STRATEGY_REQUIRES`` says which strategy each one applies to. Fields are named as their
 flags, and a value out of range is refused with a message naming the flag.
 """
 

@@ -30,6 +30,7 @@ import train_hebb
 import train_static
 from envs import ProblemSpec
 from envs.problem import Problem
+from es.files import load_dat
 from es.loop import Trainer
 from es.noise import NoiseTable
 from es.runfolder import Checkpoint, History, RunFolder
@@ -42,7 +43,7 @@ from es.worker import perturb
 from policies.network import Layout
 from policies.static import WeightFile
 from tests.extras import need
-from tests.run_helpers import assert_same_run, only_run
+from tests.run_helpers import comparable_metrics, only_run
 
 LIBRARY = {"cma_es", "sep_cma_es"}  # the strategies of the cmaes extra
 FULL_COVARIANCE = {"cma_es"}  # d x d: the project's networks (>= 4 610 parameters) are too large for a test
@@ -428,6 +429,21 @@ def test_linear_policy_runs_alike_on_one_and_two_workers_and_when_resumed(name, 
 MAINS = {"static": train_static.main, "hebbian": train_hebb.main}
 
 
+def same_run(first: Path, second: Path) -> None:
+    """Every last*/best* parameter file and the checkpoint bit for bit, the metrics but for wall clock
+    (``assert_same_run``, for the Hebbian files too)."""
+    names = sorted(path.name for path in [*first.glob("last*.dat"), *first.glob("best*.dat")])
+    assert names and names == sorted(path.name for path in [*second.glob("last*.dat"), *second.glob("best*.dat")])
+    for name in names:
+        assert load_dat(first / name).tobytes() == load_dat(second / name).tobytes(), name
+    with np.load(first / "checkpoint.npz") as one, np.load(second / "checkpoint.npz") as other:
+        assert sorted(one.files) == sorted(other.files)
+        for key in one.files:
+            if key != "total_seconds":
+                assert one[key].tobytes() == other[key].tobytes(), key
+    assert comparable_metrics(first) == comparable_metrics(second)
+
+
 def script(kind: str, *argv: str) -> None:
     out = io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(out):
@@ -452,8 +468,19 @@ def test_scripts_give_the_same_bits_on_one_and_two_workers_and_when_resumed(name
     script(kind, *argv, "--generations", "1", "--threads", "1", "--folder", str(tmp_path / "resumed"))
     runs["resumed"] = only_run(tmp_path / "resumed")
     script(kind, "--resume", str(runs["resumed"]), "--generations", "2", "--threads", "2")
-    assert_same_run(runs["serial"], runs["pool"])
-    assert_same_run(runs["serial"], runs["resumed"])
+    same_run(runs["serial"], runs["pool"])
+    same_run(runs["serial"], runs["resumed"])
+
+
+@pytest.mark.parametrize("name", ["ars", "snes"])  # ARS V2-t; members that are not mirrored pairs
+def test_observation_statistics_are_the_same_on_one_and_two_workers(name, tmp_path):
+    argv = (*TINY, "--network", "small", "--strategy", name, "--generations", "2", "--obs_norm", "--obs_norm_prob", "1")
+    for label, threads in (("serial", "1"), ("pool", "2")):
+        script("static", *argv, "--threads", threads, "--folder", str(tmp_path / label))
+    serial, pool = only_run(tmp_path / "serial"), only_run(tmp_path / "pool")
+    same_run(serial, pool)
+    with np.load(serial / "last.obs_norm.npz") as saved:
+        assert int(saved["observations"]) > 0
 
 
 @pytest.mark.parametrize("name", ["pgpe", "sep_cma_es"])  # a per-parameter sigma, and the members' vectors
@@ -463,7 +490,7 @@ def test_ray_gives_the_bits_of_one_worker(name, tmp_path):
     argv = (*TINY, "--network", "small", "--strategy", name, "--generations", "2")
     script("static", *argv, "--threads", "1", "--folder", str(tmp_path / "serial"))
     script("static", *argv, "--threads", "2", "--backend", "ray", "--folder", str(tmp_path / "ray"))
-    assert_same_run(only_run(tmp_path / "serial"), only_run(tmp_path / "ray"))
+    same_run(only_run(tmp_path / "serial"), only_run(tmp_path / "ray"))
 
 
 # --- the scripts' checks ------------------------------------------------------------------------------
