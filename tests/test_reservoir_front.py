@@ -118,7 +118,7 @@ def test_with_obs_norm_the_reservoir_reads_the_normalised_observation():
     state, states = policy.reset(params, rng), []
     for observation in observations:
         _, state = policy.act(params, state, observation)
-        states.append(state.state.copy())
+        states.append(state.inner.state.copy())  # the reservoir behind the normalisation
     normalised = np.clip((observations - mean) / std, -1.5, 1.5).astype(np.float32).astype(np.float64)
     expected = plain_loop(*rebuilt(Hyperparameters(0.3, 1.0, 1.0)), 0.3, normalised)
     np.testing.assert_allclose(np.array(states), expected, rtol=1e-12, atol=1e-14)
@@ -155,7 +155,7 @@ def test_genes_map_into_er_mrls_bounds_monotonically_and_start_at_the_given_valu
 
 def test_evolved_genes_are_the_last_parameters_outside_the_l2_penalty():
     policy = front_end(evolve=True, reservoir_lr=0.5)
-    head = front_end().head
+    head = front_end().inner
     assert policy.num_params == head.num_params + 3 and policy.penalised == slice(0, head.num_params)
     assert list(policy.layout.describe()) == ["fc1", "fc2", "fc3", "reservoir"]
     assert policy.layout.describe()["fc1"] == [128, UNITS]
