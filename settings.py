@@ -35,7 +35,7 @@ refused without ``--optimizer momentum``. The metadata (all optional but the def
     resumable        True: --resume may change it (it changes no result: threads, more generations)
     evaluation       True: the evaluate scripts take it from the run's config.json (what shapes the policy)
     requires         (setting, value): it has an effect only when that setting has that value; value ANY:
-                     when that setting is on (true, or not None)
+                     when that setting is on (true, or not None); several pairs: when all hold
     derived          True: filled in by the program (the resolved environment ids), never given
 """
 
@@ -223,11 +223,17 @@ def requirement(item: Option, declared) -> tuple[str, Callable[[dict], bool]] | 
     """What ``item`` needs, in words ("--optimizer adam"), and whether merged values have it."""
     if item.spec.requires is None:
         return None
-    name, wanted = item.spec.requires
-    other = next(entry for entry in declared if entry.name == name)
-    if wanted is ANY or wanted is True:
-        return other.label, lambda values: values.get(name) not in (None, False)
-    return f"{other.label} {wanted}", lambda values: values.get(name) == wanted
+    pairs = item.spec.requires if isinstance(item.spec.requires[0], tuple) else (item.spec.requires,)
+    words, tests = [], []
+    for name, wanted in pairs:
+        other = next(entry for entry in declared if entry.name == name)
+        if wanted is ANY or wanted is True:
+            words.append(other.label)
+            tests.append(lambda values, name=name: values.get(name) not in (None, False))
+        else:
+            words.append(f"{other.label} {wanted}")
+            tests.append(lambda values, name=name, wanted=wanted: values.get(name) == wanted)
+    return " ".join(words), lambda values: all(test(values) for test in tests)
 
 
 def unmet_requirement(declared, values: dict, given) -> str | None:
