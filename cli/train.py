@@ -20,6 +20,7 @@ from cli.errors import USER_ERRORS, Parser, UserError, explained, say
 from cli.flags import RESERVOIR_FLAGS, fraction, non_empty, positive_float, positive_int, seed_value, threads_value
 from cli.hints import TRAIN_SCRIPTS, evaluate_hint, resume_hint
 from envs import EnvSettings, ProblemSpec
+from envs.modules import resume_imports
 from es.backends import BACKENDS
 from es.loop import NonFiniteUpdate, Status, Trainer
 from es.optimizers import OPTIMIZERS
@@ -235,6 +236,10 @@ def config_for_resume(kind: str, args: argparse.Namespace, argv: list[str]) -> t
                         f"{TRAIN_SCRIPTS[config.policy.kind]}")
     given = given_flags(argv)
     check_resume_flags(config, args, given)
+    folder.check_resumable(config.es, config.policy.obs_norm)  # [trust] checkpoint against config.json, no lock held
+    if imports := resume_imports(config.env.env_ids, config.env.recipe_modules, str(folder.path / "config.json")):
+        say(imports)  # [trust] only plain, non-standard-library module names are imported
+    folder.lock()  # [trust] held until this process exits
     return config.with_values(**{name: getattr(args, name) for name in RESUMABLE if name in given}), folder
 
 
