@@ -53,6 +53,12 @@ def evaluation_parser(prog: str, description: str) -> Parser:
 def check_outputs(args: argparse.Namespace, inputs: list[str]) -> None:
     """Refuse, before any episode runs, outputs that could not be written or that would replace an
     input (the weight files) or each other."""
+    from es.outputs import JSON_SUFFIXES, check_outputs as check_paths  # [trust] the guard of every output
+    from report.plots import FIGURE_SUFFIXES
+    from report.video import VIDEO_SUFFIXES
+
+    check_paths([(flag, path, suffixes) for flag, path, suffixes in (("--json", args.json, JSON_SUFFIXES), (
+        "--plot", args.plot, FIGURE_SUFFIXES), ("--video", args.video, VIDEO_SUFFIXES)) if path is not None], inputs)
     outputs = [(flag, path) for flag, path in (("--json", args.json), ("--plot", args.plot), ("--video", args.video))
                if path is not None]
     for flag, path in outputs:
