@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 from cli import Parser, UserError
+from cli.errors import say
 from es import files
 from es.outputs import check_output
 from report import plots
@@ -62,7 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as error:
         print(f"plot_run.py: error: cannot write {args.output}: {error.strerror or error}", file=sys.stderr)
         return 2
-    print(f"wrote {args.output} ({len(runs)} runs)")
+    say(f"wrote {args.output} ({len(runs)} runs)")
     return 0
 
 

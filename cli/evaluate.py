@@ -23,6 +23,7 @@ from cli.flags import RESERVOIR_FLAGS, SEED_RANGE, add_reservoir_flags, flag_val
 from cli.train import given_flags, resolve_environments
 from envs import ProblemSpec
 from envs.headless import RenderingUnavailable, check_can_render, check_display, choose_mujoco_gl
+from es.interrupts import honour_sigint
 from es.observations import SavedStatistics, load_statistics, statistics_path
 from policies import PolicySettings
 from report.video import check_video_path
@@ -202,6 +203,7 @@ def evaluate_main(kind: str, parser: Parser, argv: list[str] | None, load_arrays
     from es.files import load_dat
     from report.video import record_first_episode
 
+    honour_sigint()  # [trust] a background job's SIGINT too
     argv = sys.argv[1:] if argv is None else argv
     args = parser.parse_args(argv)
     problem = recorder = None

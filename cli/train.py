@@ -22,6 +22,7 @@ from cli.hints import TRAIN_SCRIPTS, evaluate_hint, resume_hint
 from envs import EnvSettings, ProblemSpec
 from envs.modules import resume_imports
 from es.backends import BACKENDS
+from es.interrupts import honour_sigint
 from es.loop import NonFiniteUpdate, Status, Trainer
 from es.optimizers import OPTIMIZERS
 from es.runfolder import RunFolder, SaveError
@@ -323,13 +324,14 @@ def start(config: TrainConfig, folder: RunFolder | None) -> tuple[Trainer, objec
                                     config.env.label, log=log, display=display_for(sys.stdout), reporters=reporters)
     except BaseException:
         problem.close()
-        if created and folder is not None and not any(folder.path.iterdir()):
-            folder.path.rmdir()
+        if created and folder is not None:
+            folder.remove_if_unused()  # [trust] an empty folder but for its lock
         raise
     return trainer, problem
 
 
 def train_main(kind: str, parser: Parser, argv: list[str] | None = None) -> int:
+    honour_sigint()  # [trust] a background job's SIGINT too
     argv = sys.argv[1:] if argv is None else argv
     args = parser.parse_args(argv)
     trainer = None

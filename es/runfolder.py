@@ -187,6 +187,12 @@ class RunFolder:
                                  "wait for it to end, or stop it first") from None
         _HELD_LOCKS.append(descriptor)  # closed, so released, when the process exits
 
+    def remove_if_unused(self) -> None:
+        """Remove a folder this process created and that holds nothing but its lock (a start that failed)."""
+        if all(path.name == LOCK_FILE for path in self.path.iterdir()):
+            (self.path / LOCK_FILE).unlink(missing_ok=True)
+            self.path.rmdir()
+
     def check_resumable(self, es: ESSettings, obs_norm: bool) -> None:
         """Refuse, reading only, a checkpoint that does not fit the settings of config.json or its own
         parts, or a folder another process holds (see the module docstring)."""
