@@ -201,6 +201,10 @@ class RunFolder:
                                  "wait for it to end, or stop it first")
         checkpoint = read_checkpoint(self.path / "checkpoint.npz")
         check_checkpoint(checkpoint, es, obs_norm, self.path / "checkpoint.npz")
+        recorded = self.read_config().get("num_params")  # what the policy of config.json has (written at the start)
+        if isinstance(recorded, int) and checkpoint.theta.size != recorded:
+            raise RunFolderError(f"cannot resume from {self.path / 'checkpoint.npz'}: it holds {checkpoint.theta.size} "
+                                 f"parameters, and config.json's policy has {recorded}")
         check_metrics(self.read_metrics(checkpoint.generation), checkpoint.generation, self.path / "metrics.csv")
 
     def write(self, write: Callable, name: str, *args) -> None:
