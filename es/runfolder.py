@@ -141,11 +141,13 @@ def fitness_file_name(run_id: str, env: str) -> str:
 class RunFolder:
     path: Path
     checkpoint_generation: int | None = field(default=None)  # the generation checkpoint.npz holds
+    made_parents: list[Path] = field(default_factory=list)  # the folders above it that creating it made
 
     @classmethod
     def create(cls, folder: str | Path, label: str, seed: int) -> "RunFolder":
         """A fresh run folder ``<folder>/<time>_<env>_seed<seed>``; never an existing one."""
         folder = Path(folder)
+        made = [parent for parent in (folder, *folder.parents) if not parent.exists()]
         folder.mkdir(parents=True, exist_ok=True)
         base = f"{time.strftime('%Y%m%d-%H%M%S')}_{label}_seed{seed}"
         for attempt in range(1000):
@@ -154,12 +156,12 @@ class RunFolder:
                 path.mkdir()
             except FileExistsError:
                 continue
-            folder = cls(path)
+            run = cls(path, made_parents=made)
             try:
-                folder.lock()
+                run.lock()
             except RunFolderError:  # a process that made the same name and locked it first
                 continue
-            return folder
+            return run
         raise RunFolderError(f"cannot create a new run folder in {folder}")
 
     @classmethod
@@ -188,10 +190,16 @@ class RunFolder:
         _HELD_LOCKS.append(descriptor)  # closed, so released, when the process exits
 
     def remove_if_unused(self) -> None:
-        """Remove a folder this process created and that holds nothing but its lock (a start that failed)."""
+        """Remove a folder this process created and that holds nothing but its lock (a start that failed),
+        and the folders above it that creating it made."""
         if all(path.name == LOCK_FILE for path in self.path.iterdir()):
             (self.path / LOCK_FILE).unlink(missing_ok=True)
             self.path.rmdir()
+            for parent in self.made_parents:  # innermost first; one another process has used meanwhile stays
+                try:
+                    parent.rmdir()
+                except OSError:
+                    break
 
     def check_resumable(self, es: ESSettings, obs_norm: bool) -> None:
         """Refuse, reading only, a checkpoint that does not fit the settings of config.json or its own

@@ -351,14 +351,14 @@ def test_models(args: argparse.Namespace, name: str, evolve_hint: str, several: 
     setup = load_test_setup(args, name, evolve_hint, env_id, several, nb_res, fixed_iss_default, seed)
     folder = safe_file_name(f"{args.env_id}_{args.h_test}")
     logdir, models_dir = Path("logs") / folder, Path("models") / folder
-    with explained("cannot create the output folders"):
-        logdir.mkdir(parents=True, exist_ok=True)
-        models_dir.mkdir(parents=True, exist_ok=True)
     steps_label = f"{args.training_steps // 1000}k_steps_seed_{seed}"
     chosen_models = MODELS_DEL_OBS if setup.del_obs else models
     summary_path = models_dir / f"test_{steps_label}.json"
     check_test_outputs([models_dir / f"{name}_{steps_label}.zip" for name in chosen_models] + [summary_path],
                        args.overwrite)
+    with explained("cannot create the output folders"):
+        logdir.mkdir(parents=True, exist_ok=True)
+        models_dir.mkdir(parents=True, exist_ok=True)
     results = {}
     for model_name, learning_rate in chosen_models.items():
         run_name = f"{model_name}_{steps_label}"
