@@ -18,7 +18,6 @@ from es import files
 from es.outputs import check_output
 from report import plots
 
-
 DEFAULT_OUTPUT = "fitness_comparison.png"
 
 
