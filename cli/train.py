@@ -25,7 +25,7 @@ from es.backends import BACKENDS
 from es.interrupts import honour_sigint
 from es.loop import NonFiniteUpdate, Status, Trainer
 from es.optimizers import OPTIMIZERS
-from es.runfolder import RunFolder, SaveError
+from es.runfolder import RunFolder, SaveError, release_locks
 from es.settings import RESUMABLE, ESSettings, RunSettings
 from es.shaping import SHAPINGS
 from policies import PolicySettings
@@ -372,6 +372,7 @@ def train_main(kind: str, parser: Parser, argv: list[str] | None = None) -> int:
     finally:
         if trainer is not None:
             trainer.close()
+        release_locks()  # [trust] the run folder's lock, for the next run in this process
 
 
 def report_end(trainer: Trainer, config: TrainConfig, status: Status) -> None:

@@ -320,6 +320,12 @@ def read_checkpoint(path: Path) -> Checkpoint:
 _HELD_LOCKS: list[int] = []
 
 
+def release_locks() -> None:
+    """Release the run folders this process holds (at the end of a script's run; exiting does it too)."""
+    while _HELD_LOCKS:
+        os.close(_HELD_LOCKS.pop())
+
+
 def _locked_elsewhere(path: Path) -> bool:
     """Whether another process holds the lock at ``path`` (tested with a shared lock, released at once)."""
     try:
