@@ -60,33 +60,33 @@ def check_output(flag: str, path: str | Path, suffixes: tuple[str, ...], inputs:
     """``path`` as the output ``flag`` names, or an OutputRefused naming why it cannot be one."""
     given = str(path)
     target = Path(path)
-    if target.suffix.lower() not in suffixes:
-        raise OutputRefused(f"{flag} {given}: the file's suffix says its format; give a name ending in "
-                            f"{', '.join(suffixes)}")
     if target.exists() and not target.is_file():
         raise OutputRefused(f"{flag} {given}: exists and is not a regular file (a folder or a device); give a file name")
+    resolved = target.resolve()
+    if not resolved.parent.is_dir() or not os.access(resolved.parent, os.W_OK | os.X_OK):
+        raise OutputRefused(f"{flag} {given}: {target.parent} is not an existing writable folder")
     for other in inputs:
         if same_file(target, other):
-            raise OutputRefused(f"{flag} {given} is {other}, which this command reads; give another file name")
-    resolved = target.resolve()
+            raise OutputRefused(f"{flag} {given} is {other}, which this command reads (a weight file or one beside "
+                                "it); writing it would destroy the input: give another file name")
     run = run_folder_of(resolved)
     if run is not None and (resolved.parent != run or any(fnmatch.fnmatch(resolved.name, pattern) for pattern in RUN_FILES)):
         raise OutputRefused(f"{flag} {given} is {resolved.relative_to(run)} of the run folder {run}, a file the run "
                             "writes; give another file name")
     if fnmatch.fnmatch(resolved.name, JOURNAL):
         raise OutputRefused(f"{flag} {given} is an optuna journal of ER-MRL; give another file name")
-    parent = resolved.parent
-    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
-        raise OutputRefused(f"{flag} {given}: {target.parent} is not an existing writable folder")
+    if target.suffix.lower() not in suffixes:
+        raise OutputRefused(f"{flag} {given}: the file's suffix says its format; give a name ending in "
+                            f"{', '.join(suffixes)}")
     return target
 
 
 def check_outputs(outputs: list[tuple[str, str | Path, tuple[str, ...]]], inputs: Iterable[str | Path] = ()) -> None:
     """Each output (flag, path, suffixes) checked, and no two the same file."""
-    inputs = list(inputs)
-    for flag, path, suffixes in outputs:
-        check_output(flag, path, suffixes, inputs)
     for index, (flag, path, _) in enumerate(outputs):
         for other_flag, other, _ in outputs[index + 1:]:
             if same_file(path, other):
                 raise OutputRefused(f"{flag} and {other_flag} are the same file {path}; give each its own name")
+    inputs = list(inputs)
+    for flag, path, suffixes in outputs:
+        check_output(flag, path, suffixes, inputs)
