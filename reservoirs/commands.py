@@ -31,6 +31,7 @@ from cli.errors import USER_ERRORS, Parser, UserError, explained
 from cli.errors import say as log
 from cli.flags import flag_value, positive_float, positive_int, seed_value
 from es.files import atomic_write_bytes, atomic_write_text, write_json
+from es.outputs import check_output
 from reservoirs import SEARCH_BOUNDS, experiments
 from reservoirs.esn import ReservoirSettings
 from reservoirs.experiments import ENV_TYPES, TARGET_RETURN, SearchSpace, env_ids_for, reservoirs_from_params
@@ -424,9 +425,7 @@ def get_random_scores(prog: str, args: argparse.Namespace) -> int:
         env_ids = [resolve_env(env_id.strip()) for env_id in args.env_ids.split(",") if env_id.strip()]
     if not env_ids:
         raise UserError(f"--env_ids {args.env_ids!r} names no environment; give ids separated by commas")
-    output = Path(args.output)
-    if output.is_dir() or not output.resolve().parent.is_dir():
-        raise UserError(f"--output {args.output} must be a file in an existing folder")
+    output = check_output("--output", args.output, (".txt",))  # never a file of a run, a journal or a folder
     lines = []
     for env_id in env_ids:
         with explained(f"cannot make {env_id}"):
