@@ -23,7 +23,6 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
-
 import numpy as np
 import pytest
 
@@ -39,7 +38,7 @@ def run_folder(tmp_path_factory) -> Path:
     """One real run, made once for the module; each case works on its own copy."""
     folder = tmp_path_factory.mktemp("bad_inputs_run")
     result = subprocess.run([sys.executable, str(ROOT / "train_static.py"), *RUN, "--folder", str(folder)], cwd=ROOT,
-                            env=BASE_ENV, capture_output=True, text=True, timeout=300)
+                            env=BASE_ENV, check=False, capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
     (run,) = folder.iterdir()
     (run / ".lock").unlink()  # held by the process that trained it, now gone
@@ -327,7 +326,7 @@ def outcomes(run_folder, tmp_path_factory, request) -> dict[str, Outcome]:
 
     def execute(name: str) -> subprocess.CompletedProcess:
         command, environ, work, _ = prepared[name]
-        return subprocess.run(command, cwd=work, env=environ, capture_output=True, text=True, timeout=300)
+        return subprocess.run(command, cwd=work, env=environ, check=False, capture_output=True, text=True, timeout=300)
 
     try:
         with ThreadPoolExecutor(max(2, os.cpu_count() or 1)) as pool:
