@@ -1,27 +1,34 @@
 #!/usr/bin/env python
-"""Gymnasium's CarRacing against the project's FastCarRacing, measured in one run (issue 9).
+"""Gymnasium's CarRacing against the project's FastCarRacing, measured in one run (issues 9, 21).
 
-    python benchmarks/car_racing.py               # env and training-loop speed, the pixel policy's share
-    python benchmarks/car_racing.py --identity    # and 20 long episodes compared frame by frame
+    python benchmarks/car_racing.py               # speed, the training loops, the projection
+    python benchmarks/car_racing.py --memory      # and the paper's Hebbian run's memory (PSS/USS)
+    python benchmarks/car_racing.py --identity    # and long episodes compared step by step
 
 Gymnasium's class is ``CarRacingStock-v3``, the project's ``CarRacing-v3``. Everything is timed in
 CPU time of this process, the two classes alternating (round by round for the environment, episode
-by episode for the training loop) so that this machine's drift (about +-40 %) and other load fall
-on both alike; the medians over rounds are printed.
+by episode for the training loops) so that this machine's drift and other load fall on both alike;
+the medians over rounds are printed.
 
-- environment: ``env.step`` of each class, the same seeds and random actions (resets untimed);
-- training loop: the real evaluation path (serial evaluator, worker, recipe wrappers, network,
-  rollout) on the same generation of tasks, static and Hebbian (ABCD_lr), generation-0 parameters,
-  so early-stopped episodes, resets included; both classes must return the same fitness;
-- the pixel policy's share of a step of the fast class: ``PixelObservation``'s resize, then the CNN
-  and the dense head (and the Hebbian update), against ``env.step`` (all wrappers but the recipe's);
-- ``--identity``: episodes of up to 1000 steps on seeds and drivers that no test uses (a
-  track-following controller at two speeds, smoothed random driving, full throttle, braking),
-  observations, rewards, flags and info compared at every step and ``rgb_array`` frames every
-  ``--frame_every`` steps; exit code 1 on the first difference.
+- environment: ``env.step`` of each class, the same seeds and random actions (resets untimed), and
+  ``env.reset`` (track generation, tile bodies, the first frame) on the same seeds;
+- training loop, generation 0: the real evaluation path (serial evaluator, worker, recipe wrappers,
+  network, rollout) on the same generation of tasks, static and Hebbian (ABCD_lr), so early-stopped
+  episodes, resets included; both classes must return the same fitness;
+- training loop, capped episodes: what a worker does for a trained agent, ``--length`` steps per
+  episode (the early stop left out), reset, resize, network (and Hebbian update), action mapping
+  and ``env.step`` all timed, per step;
+- the projection of the paper's Hebbian run (population 200, 300 generations, episodes of 1000
+  steps) on 2 and 16 workers from the capped Hebbian loop's cost per step, as
+  ``experiments/step_cost.py`` does: (popsize + 1) x 1000 x step / workers per generation;
+- ``--memory``: ``train_hebb.py`` at the paper's population (200) with 2 workers for one
+  generation, its processes' summed PSS and USS (``/proc/PID/smaps_rollup``) sampled while it runs;
+- ``--identity``: episodes of up to 1000 steps on seeds and drivers that no test uses, observations,
+  rewards, flags and info compared at every step and ``rgb_array`` frames every ``--frame_every``
+  steps; exit code 1 on the first difference.
 
-Targets: the environment >= 2.5x the stock class (aim 4x); the Hebbian training loop >= 2.5x
-faster per step.
+Targets (issue 21): env.step >= 8x the stock class (goal 15x), reset >= 2.5x (goal 4x), the Hebbian
+training loop per step >= 5x (goal 8x).
 """
 
 from __future__ import annotations
@@ -37,18 +44,20 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-import envs  # noqa: E402  (headless defaults; CarRacing-v3 is the fast class)
-import gymnasium as gym  # noqa: E402
-from envs import ProblemSpec  # noqa: E402
-from envs.make import STOCK_CAR_RACING_ID as STOCK_ID  # noqa: E402
-from envs.wrappers import CarRacingAction, PixelObservation  # noqa: E402
-from es.backends import Generation, SerialEvaluator  # noqa: E402
-from policies import PolicySettings  # noqa: E402
-from es.noise import NoiseTable  # noqa: E402
-from throughput import generation_tasks  # noqa: E402  (benchmarks/throughput.py)
+import gymnasium as gym
+from throughput import generation_tasks
+
+import envs
+from envs import ProblemSpec
+from envs.make import STOCK_CAR_RACING_ID as STOCK_ID
+from envs.wrappers import CarRacingAction, PixelObservation
+from es.backends import Generation, SerialEvaluator
+from es.noise import NoiseTable
+from policies import PolicySettings
 
 FAST_ID = "CarRacing-v3"
-ENV_TARGET, LOOP_TARGET = 2.5, 2.5
+ENV_TARGET, RESET_TARGET, LOOP_TARGET = 8.0, 2.5, 5.0
+PAPER_POPSIZE, PAPER_GENERATIONS, FULL_EPISODE = 200, 300, 1000
 
 
 def make(env_id: str, render_mode: str | None = None) -> gym.Env:
@@ -92,6 +101,73 @@ def env_rates(rounds: int, steps: int) -> tuple[list[float], list[float]]:
     return stock_rates, fast_rates
 
 
+def reset_rates(rounds: int, resets: int) -> tuple[list[float], list[float]]:
+    """Resets per CPU second of each class, per round, on the same seeds."""
+    stock, fast = make(STOCK_ID), make(FAST_ID)
+    fast.reset(seed=0)  # warm-up
+    rates: list[list[float]] = [[], []]
+    for round_index in range(rounds):
+        for env, found in ((stock, rates[0]), (fast, rates[1])):
+            started = time.process_time()
+            for seed in range(resets):
+                env.reset(seed=900 + round_index * resets + seed)
+            found.append(resets / (time.process_time() - started))
+    stock.close()
+    fast.close()
+    return rates[0], rates[1]
+
+
+def capped_episode(problem, params, seed: int, length: int) -> tuple[float, int]:
+    """CPU seconds of one episode of at most ``length`` steps, the reset included, and its steps:
+    a worker's loop without the early stop (resize, network, action mapping, env.step)."""
+    pixels, squash, env = _pixel_chain(problem)
+    policy = problem.policy
+    started = time.process_time()
+    frame, _ = env.reset(seed=seed)
+    state = policy.reset(params, np.random.default_rng(seed))
+    steps = 0
+    for steps in range(1, length + 1):
+        output, state = policy.act(params, state, pixels.observation(frame))
+        frame, _, terminated, truncated, _ = env.step(squash.action(output))
+        if terminated or truncated:
+            break
+    return time.process_time() - started, steps
+
+
+def _pixel_chain(problem):
+    """The recipe's pixel and action wrappers, and what is below them (Gymnasium's wrappers and the class)."""
+    chain, wrappers = problem.envs[0], []
+    while isinstance(chain, gym.Wrapper):
+        wrappers.append(chain)
+        chain = chain.env
+    pixels = next(w for w in wrappers if isinstance(w, PixelObservation))
+    squash = next(w for w in wrappers if isinstance(w, CarRacingAction))
+    return pixels, squash, pixels.env
+
+
+def capped_loop_rates(kind: str, rounds: int, episodes: int, length: int) -> tuple[list[float], list[float]]:
+    """Steps per CPU second of the capped training loop with each class, per round (resets counted)."""
+    problems = [ProblemSpec((env_id,), PolicySettings(kind)).build() for env_id in (STOCK_ID, FAST_ID)]
+    params = problems[0].policy.initial_params(np.random.default_rng(0))
+    for problem in problems:
+        capped_episode(problem, params, 0, 3)  # warm-up: compilation
+    rates: list[list[float]] = [[], []]
+    try:
+        for round_index in range(rounds):
+            seconds, steps = [0.0, 0.0], [0, 0]
+            for episode in range(episodes):
+                for index, problem in enumerate(problems):
+                    spent, count = capped_episode(problem, params, 3000 + round_index * episodes + episode, length)
+                    seconds[index] += spent
+                    steps[index] += count
+            for index in range(2):
+                rates[index].append(steps[index] / seconds[index])
+    finally:
+        for problem in problems:
+            problem.close()
+    return rates[0], rates[1]
+
+
 def loop_rates(kind: str, rounds: int, popsize: int) -> tuple[list[float], list[float], float]:
     """Training-loop steps per CPU second with each class, per round, and the mean episode length."""
     specs = [ProblemSpec((env_id,), PolicySettings(kind)) for env_id in (STOCK_ID, FAST_ID)]
@@ -130,14 +206,8 @@ def loop_rates(kind: str, rounds: int, popsize: int) -> tuple[list[float], list[
 def policy_share(kind: str, steps: int) -> dict[str, float]:
     """CPU seconds per step of the fast class: env.step, the resize, the network (with its update)."""
     problem = ProblemSpec((FAST_ID,), PolicySettings(kind)).build()
-    chain = problem.envs[0]
-    wrappers = []
-    while isinstance(chain, gym.Wrapper):
-        wrappers.append(chain)
-        chain = chain.env
-    pixels = next(w for w in wrappers if isinstance(w, PixelObservation))
-    squash = next(w for w in wrappers if isinstance(w, CarRacingAction))
-    env, policy = pixels.env, problem.policy  # env: the fast class with Gymnasium's own wrappers
+    pixels, squash, env = _pixel_chain(problem)  # env: the fast class with Gymnasium's own wrappers
+    policy = problem.policy
     params = policy.initial_params(np.random.default_rng(0))
     frame, _ = env.reset(seed=0)  # untimed warm-up: numba's kernels, torch's first convolution
     policy.act(params, policy.reset(params, np.random.default_rng(0)), pixels.observation(frame))
@@ -228,10 +298,66 @@ def identity(episodes: int, frame_every: int) -> bool:
     return True
 
 
-def summary(label: str, stock: list[float], fast: list[float], target: float | None = None) -> None:
+def _process_tree(root: int) -> list[int]:
+    """``root`` and its descendants, from /proc."""
+    children: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                parent = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+            children.setdefault(parent, []).append(int(entry.name))
+    tree, queue = [], [root]
+    while queue:
+        pid = queue.pop()
+        tree.append(pid)
+        queue.extend(children.get(pid, []))
+    return tree
+
+
+def _pss_uss(pids: list[int]) -> tuple[int, int]:
+    """Summed PSS and USS (private clean + dirty) in bytes of these processes (shared pages once)."""
+    pss = uss = 0
+    for pid in pids:
+        try:
+            fields = dict(line.split(":", 1) for line in Path(f"/proc/{pid}/smaps_rollup").read_text().splitlines()[1:])
+        except OSError:
+            continue
+        kilobytes = {name: int(value.split()[0]) for name, value in fields.items()}
+        pss += 1024 * kilobytes.get("Pss", 0)
+        uss += 1024 * (kilobytes.get("Private_Clean", 0) + kilobytes.get("Private_Dirty", 0))
+    return pss, uss
+
+
+def paper_run_memory(workers: int, popsize: int) -> tuple[int, int, int]:
+    """Peak summed PSS and USS of ``train_hebb.py`` on CarRacing at ``popsize`` with ``workers``
+    worker processes, for one generation, sampled every 0.2 s; and its number of processes."""
+    import subprocess
+    import tempfile
+
+    root = Path(__file__).resolve().parent.parent
+    with tempfile.TemporaryDirectory() as folder:
+        command = [sys.executable, str(root / "train_hebb.py"), "--environment", "CarRacing-v0", "--hebb_rule",
+                   "ABCD_lr", "--popsize", str(popsize), "--generations", "1", "--threads", str(workers),
+                   "--folder", folder, "--seed", "1"]
+        process = subprocess.Popen(command, cwd=root, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        peak_pss = peak_uss = most = 0
+        while process.poll() is None:
+            tree = _process_tree(process.pid)
+            pss, uss = _pss_uss(tree)
+            peak_pss, peak_uss, most = max(peak_pss, pss), max(peak_uss, uss), max(most, len(tree))
+            time.sleep(0.2)
+        if process.returncode != 0:
+            raise RuntimeError(f"{' '.join(command)} exited with {process.returncode}")
+    return peak_pss, peak_uss, most
+
+
+def summary(label: str, stock: list[float], fast: list[float], target: float | None = None,
+            unit: str = "steps") -> None:
     ratios = [f / s for s, f in zip(stock, fast)]
     goal = f" (target >= {target}x)" if target else ""
-    print(f"{label}: stock {statistics.median(stock):,.0f}, fast {statistics.median(fast):,.0f} steps per CPU "
+    print(f"{label}: stock {statistics.median(stock):,.1f}, fast {statistics.median(fast):,.1f} {unit} per CPU "
           f"second; ratio {statistics.median(ratios):.2f}x{goal} (rounds: {', '.join(f'{r:.2f}' for r in ratios)})")
 
 
@@ -239,29 +365,53 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--steps", type=int, default=300, help="environment steps per class and round")
-    parser.add_argument("--popsize", type=int, default=8, help="episodes per training-loop round")
+    parser.add_argument("--resets", type=int, default=4, help="resets per class and round")
+    parser.add_argument("--popsize", type=int, default=8, help="episodes per generation-0 training-loop round")
+    parser.add_argument("--episodes", type=int, default=2, help="capped episodes per training-loop round")
+    parser.add_argument("--length", type=int, default=300, help="steps of a capped episode")
     parser.add_argument("--share_steps", type=int, default=600, help="steps measured for the policy's share")
+    parser.add_argument("--memory", action="store_true", help="also measure the paper's Hebbian run's memory")
     parser.add_argument("--identity", action="store_true", help="also compare long episodes frame by frame")
-    parser.add_argument("--episodes", type=int, default=20, help="with --identity: how many episodes")
+    parser.add_argument("--episodes_compared", type=int, default=20, help="with --identity: how many episodes")
     parser.add_argument("--frame_every", type=int, default=50, help="with --identity: compare render() this often")
     args = parser.parse_args()
-    for name in ("rounds", "steps", "popsize", "share_steps", "episodes", "frame_every"):
+    for name in ("rounds", "steps", "resets", "popsize", "episodes", "length", "share_steps", "episodes_compared",
+                 "frame_every"):
         if getattr(args, name) < 1:
             parser.error(f"--{name} must be at least 1, got {getattr(args, name)}")
     summary("environment (env.step)", *env_rates(args.rounds, args.steps), ENV_TARGET)
+    summary("environment (env.reset)", *reset_rates(args.rounds, args.resets), RESET_TARGET, unit="resets")
     for kind in ("static", "hebbian"):
         stock, fast, length = loop_rates(kind, args.rounds, args.popsize)
-        summary(f"training loop, {kind} (mean episode {length:.0f} steps)", stock, fast,
+        summary(f"training loop, generation 0, {kind} (mean episode {length:.0f} steps)", stock, fast)
+    hebbian_step = None
+    for kind in ("static", "hebbian"):
+        stock, fast = capped_loop_rates(kind, args.rounds, args.episodes, args.length)
+        summary(f"training loop, episodes capped at {args.length} steps, {kind}", stock, fast,
                 LOOP_TARGET if kind == "hebbian" else None)
+        if kind == "hebbian":
+            hebbian_step = (1 / statistics.median(stock), 1 / statistics.median(fast))
+    for workers in (2, 16):
+        hours = [(PAPER_POPSIZE + 1) * FULL_EPISODE * step / workers * PAPER_GENERATIONS / 3600 for step in hebbian_step]
+        print(f"projection, the paper's Hebbian run (popsize {PAPER_POPSIZE}, {PAPER_GENERATIONS} generations, "
+              f"{FULL_EPISODE}-step episodes) on {workers} workers: stock {hours[0]:.1f} h, fast {hours[1]:.1f} h")
     for kind in ("static", "hebbian"):
         parts = policy_share(kind, args.share_steps)
         total = sum(parts.values())
         print(f"pixel policy, {kind}: {1e3 * total:.2f} ms CPU per step of the fast class: "
               + ", ".join(f"{part} {1e3 * seconds:.2f} ms ({seconds / total:.0%})" for part, seconds in parts.items())
               + f"; the policy (resize + network) is {(parts['resize'] + parts['network']) / total:.0%} of a step")
+    import resource
+
+    print(f"peak memory of this process: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB (RSS)")
+    if args.memory:
+        pss, uss, processes = paper_run_memory(2, PAPER_POPSIZE)
+        print(f"memory, train_hebb.py CarRacing-v0 ABCD_lr, popsize {PAPER_POPSIZE}, 2 workers, one generation: "
+              f"peak PSS {pss / 2**20:.0f} MiB, peak USS {uss / 2**20:.0f} MiB over {processes} processes "
+              f"(target < 1 GB)")
     if args.identity:
-        print(f"identity: {args.episodes} episodes of up to 1000 steps, frames every {args.frame_every} steps")
-        if not identity(args.episodes, args.frame_every):
+        print(f"identity: {args.episodes_compared} episodes of up to 1000 steps, frames every {args.frame_every} steps")
+        if not identity(args.episodes_compared, args.frame_every):
             return 1
         print("identity: every observation, reward, flag, info and compared frame identical")
     return 0

@@ -177,12 +177,9 @@ def reservoir_options(args: argparse.Namespace, argv: list[str], weight_file: Pa
 
 
 def describe_reservoir(problem, params) -> None:
-    """One line: the reservoir the weights are evaluated with (evolved hyperparameters decoded)."""
-    settings = problem.spec.policy
-    if settings.reservoir:
-        evolved = " (evolved)" if settings.reservoir_evolve else ""
-        say(f"reservoir: {settings.reservoir_units} units, seed {settings.reservoir_seed}, "
-            f"{problem.policy.hyperparameters(params).describe()}{evolved}")
+    """One line for each front end the weights are evaluated with (a reservoir's evolved hyperparameters decoded)."""
+    for line in problem.policy.describe_front_ends(params):
+        say(line)
 
 
 def normalise_observations(problem, weight_file: Path, statistics: SavedStatistics | None) -> None:

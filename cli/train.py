@@ -319,7 +319,7 @@ def start(config: TrainConfig, folder: RunFolder | None) -> tuple[Trainer, objec
         with explained("cannot start the run"):
             reporters = [GenerationLog(log), FitnessPlot()]
             if config.run.tensorboard:
-                reporters.append(tensorboard.TensorBoardLog(folder.path))
+                reporters.append(tensorboard.TensorBoardLog(folder.path, problem.policy.metrics_columns))
             trainer = Trainer.start(config.es, config.run, problem, spec.build, config.env.env_ids, folder,
                                     config.env.label, log=log, display=display_for(sys.stdout), reporters=reporters)
     except BaseException:

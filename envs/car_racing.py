@@ -13,11 +13,15 @@ touch them) and computes the same picture with less work:
   would clip every one of their pixels away);
 - the playfield polygon, when it covers the screen with its edges out of sight, is a fill of the
   pixel pygame would write;
-- for observations (``state_pixels``), the road, the grass and the car are drawn by
-  ``envs.pygame_raster``, pygame's own polygon algorithms compiled with numba, straight into the
-  flipped frame (no flip of the 1000 x 800 picture), in the stock order; the car's corners come
-  from Box2D's transform computed in float32 as Box2D does (``box2d_transform``). The dashboard
-  and the score are still drawn by pygame, and the picture is shrunk by pygame's ``smoothscale``;
+- for observations (``state_pixels``), no picture is drawn (issue 21): the road, the grass, the
+  car and the dashboard are recorded as spans by ``envs.pygame_raster`` (pygame's own polygon
+  algorithms compiled with numba) in the stock order, flipped as the stock flips its picture, the
+  score's pixels are those its blit writes, and ``envs.car_racing_observation`` computes
+  ``smoothscale``'s 96 x 96 result from the spans; the car's corners come from Box2D's transform
+  computed in float32 as Box2D does (``box2d_transform``). ``self.surf`` is then not updated;
+- where ``smoothscale``'s backend is not SSE2 or NEON, the world is drawn by the same compiled
+  functions straight into the flipped frame, the dashboard and score by pygame, and the picture
+  shrunk by ``smoothscale`` itself;
 - video frames (``rgb_array``, ``human``), which also draw the skid marks, and any frame the
   compiled drawing cannot promise to reproduce (a coordinate beyond +-16383, a colour that is not
   plain RGB, a surface that is not 32-bit XRGB), go through pygame's own drawing calls, fewer of
@@ -42,6 +46,7 @@ from gymnasium.envs.box2d import car_racing as stock
 from pygame import gfxdraw
 
 from envs import pygame_raster
+from envs.car_racing_observation import SpanObservation
 
 _W, _H = stock.WINDOW_W, stock.WINDOW_H
 _CULL_MARGIN = stock.MAX_SHAPE_DIM
@@ -53,6 +58,9 @@ _FILL_MARGIN = 3
 # |coordinate| below this: its integer is within what envs.pygame_raster reproduces
 _COMPILED_BOUND = pygame_raster.LARGEST_COORDINATE + 1
 _STATE_MODES = ("state_pixels", "state_pixels_list")
+# smoothscale's backends whose arithmetic envs.car_racing_observation reproduces (NEON runs the SSE2
+# code through sse2neon); with another (GENERIC: pygame's plain C filter), pygame shrinks the picture
+_SPAN_BACKENDS = ("SSE2", "NEON")
 
 
 def _rotated(x: np.ndarray, y: np.ndarray, angle: float) -> tuple[np.ndarray, np.ndarray]:
@@ -178,6 +186,8 @@ class FastCarRacing(stock.CarRacing):
         self._probe: pygame.Surface | None = None
         self._scaled: dict[tuple[int, int], pygame.Surface] = {}
         self._compiled_drawing = False
+        self._spans: SpanObservation | None = None  # the observation without the full picture
+        self._score_pixels: tuple[str, np.ndarray, int, int] | None = None
         self._font: pygame.font.Font | None = None
         self._score_text: tuple[str, pygame.Surface, pygame.Rect] | None = None
         self._road_source: list | None = None
@@ -202,6 +212,8 @@ class FastCarRacing(stock.CarRacing):
             return None  # reset() not called yet
         self._make_surfaces()
         camera = self._camera()
+        if mode == "state_pixels" and (observation := self._observe_from_spans(camera)) is not None:
+            return observation
         if mode not in _STATE_MODES or not self._draw_compiled(*camera):
             self._draw_with_pygame(*camera, draw_particles=mode not in _STATE_MODES)
         self.surf = self._frame
@@ -231,6 +243,8 @@ class FastCarRacing(stock.CarRacing):
         self._compiled_drawing = (self._frame.get_bitsize() == 32 and self._frame.get_pitch() == 4 * _W
                                   and self._frame.get_masks() == (0xFF0000, 0xFF00, 0xFF, 0)
                                   and self._frame.map_rgb((1, 2, 3)) == 0x010203)
+        if self._compiled_drawing and pygame.transform.get_smoothscale_backend() in _SPAN_BACKENDS:
+            self._spans = SpanObservation(_W, _H, stock.STATE_W, stock.STATE_H)
 
     def _camera(self) -> tuple[float, tuple[float, float], float]:
         """Zoom, translation and angle of the stock ``_render``, computed as it does."""
@@ -341,8 +355,22 @@ class FastCarRacing(stock.CarRacing):
     def _draw_compiled(self, zoom, translation, angle) -> bool:
         """The world straight into the flipped frame by ``envs.pygame_raster``; False, having drawn
         nothing, where that cannot be guaranteed to match pygame (then pygame draws it)."""
-        if not self._compiled_drawing:
+        scene = self._compiled_scene(zoom, translation, angle)
+        if scene is None:
             return False
+        background, *polygons = scene
+        self._frame.fill(background)
+        frame = pygame.surfarray.pixels2d(self._frame).T  # (height, width) view of the frame's pixels
+        pygame_raster.draw_polygons(frame, True, *polygons)
+        del frame  # release the surface's lock before anything blits onto it
+        return True
+
+    def _compiled_scene(self, zoom, translation, angle) -> tuple | None:
+        """The background pixel and the world's polygons for ``pygame_raster.draw_polygons``
+        (xs, ys, starts, pixel values, anti-aliased); None where the compiled drawing cannot be
+        guaranteed to match pygame."""
+        if not self._compiled_drawing:
+            return None
         playfield = to_screen(self._playfield, zoom, translation, angle)
         pixels = pygame_pixels(playfield)
         covered = pixels is not None and covers_screen(pixels)
@@ -351,21 +379,89 @@ class FastCarRacing(stock.CarRacing):
         world_colors = self._world_pixel_values(drawn)
         background = self._plain_pixel(self.bg_color)
         if world_colors is None or background is None or None in car_colors or min(car_counts) < 4:
-            return False  # (pygame draws triangles with another algorithm)
+            return None  # (pygame draws triangles with another algorithm)
         parts = [world.reshape(-1, 2), car_corners] if covered else [playfield, world.reshape(-1, 2), car_corners]
         corners = np.concatenate(parts)
         if not np.all(np.abs(corners) < _COMPILED_BOUND):  # also False for NaN
-            return False
+            return None
         smooth = len(drawn) + (not covered)
         colors = np.concatenate([world_colors if covered else [background, *world_colors], car_colors])
         starts = np.cumsum([0] + [4] * smooth + car_counts)
         integers = np.trunc(corners).astype(np.int64)
-        self._frame.fill(background if covered else 0)  # a new stock surface is black
-        frame = pygame.surfarray.pixels2d(self._frame).T  # (height, width) view of the frame's pixels
-        pygame_raster.draw_polygons(frame, True, integers[:, 0].copy(), integers[:, 1].copy(), starts,
-                                    colors.astype(np.int64), np.arange(len(colors)) < smooth)
-        del frame  # release the surface's lock before anything blits onto it
-        return True
+        return (background if covered else 0,  # a new stock surface is black
+                integers[:, 0].copy(), integers[:, 1].copy(), starts, colors.astype(np.int64),
+                np.arange(len(colors)) < smooth)
+
+    # --- the observation without the picture -------------------------------------------------
+
+    def _observe_from_spans(self, camera) -> np.ndarray | None:
+        """The observation from spans (``envs.car_racing_observation``): the world, the dashboard
+        and the score as the stock class draws them, none of them on a surface; None where the
+        compiled drawing cannot promise pygame's pixels (then the picture is drawn)."""
+        if self._spans is None:
+            return None
+        scene = self._compiled_scene(*camera)
+        indicators = self._indicator_polygons()
+        if scene is None or indicators is None:
+            return None
+        background, *polygons = scene
+        while True:
+            target = self._spans.target()
+            self._spans.record_polygons(target, True, *polygons)  # the world, flipped as the stock flips it
+            for xs, ys, value in indicators:
+                pygame_raster.draw_polygon(target, False, xs, ys, value)
+            if not self._spans.overflowed():
+                break
+        return self._spans.observe(background, *self._score_image())
+
+    def _indicator_polygons(self) -> list[tuple[np.ndarray, np.ndarray, int]] | None:
+        """The stock ``_render_indicators``'s polygons, its expressions, as pygame's integer corners
+        and pixel values; None if a corner is beyond what the compiled drawing reproduces."""
+        s, h = _W / 40.0, _H / 40.0
+        car = self.car
+
+        def vertical(place, value):
+            return [(place * s, _H - (h + h * value)), ((place + 1) * s, _H - (h + h * value)),
+                    ((place + 1) * s, _H - h), ((place + 0) * s, _H - h)]
+
+        def horizontal(place, value):
+            return [((place + 0) * s, _H - 4 * h), ((place + value) * s, _H - 4 * h),
+                    ((place + value) * s, _H - 2 * h), ((place + 0) * s, _H - 2 * h)]
+
+        true_speed = np.sqrt(np.square(car.hull.linearVelocity[0]) + np.square(car.hull.linearVelocity[1]))
+        wheels = car.wheels
+        shown = [(1.0, [(_W, _H), (_W, _H - 5 * h), (0, _H - 5 * h), (0, _H)], (0, 0, 0)),
+                 (true_speed, vertical(5, 0.02 * true_speed), (255, 255, 255)),
+                 (wheels[0].omega, vertical(7, 0.01 * wheels[0].omega), (0, 0, 255)),
+                 (wheels[1].omega, vertical(8, 0.01 * wheels[1].omega), (0, 0, 255)),
+                 (wheels[2].omega, vertical(9, 0.01 * wheels[2].omega), (51, 0, 255)),
+                 (wheels[3].omega, vertical(10, 0.01 * wheels[3].omega), (51, 0, 255)),
+                 (wheels[0].joint.angle, horizontal(20, -10.0 * wheels[0].joint.angle), (0, 255, 0)),
+                 (car.hull.angularVelocity, horizontal(30, -0.8 * car.hull.angularVelocity), (255, 0, 0))]
+        polygons = []
+        for value, points, color in shown:
+            if abs(value) > 1e-4:  # the stock render_if_min
+                coordinates = [c for point in points for c in point]
+                if not all(abs(c) < _COMPILED_BOUND for c in coordinates):  # also False for NaN
+                    return None
+                integers = np.array(coordinates, dtype=np.float64).astype(np.int64)  # truncation, as pygame
+                polygons.append((integers[0::2], integers[1::2], (color[0] << 16) | (color[1] << 8) | color[2]))
+        return polygons
+
+    def _score_image(self) -> tuple[np.ndarray, int, int]:
+        """The score's pixels as the stock blit writes them, and where: made once per distinct text."""
+        text = f"{self.reward:04.0f}"
+        if self._score_pixels is None or self._score_pixels[0] != text:
+            if self._font is None:
+                self._font = pygame.font.Font(pygame.font.get_default_font(), 42)
+            image = self._font.render(text, True, (255, 255, 255), (0, 0, 0))
+            rect = image.get_rect()
+            rect.center = (60, _H - _H * 2.5 / 40.0)
+            copy = pygame.Surface(image.get_size())  # the frame's pixel format
+            copy.blit(image, (0, 0))
+            pixels = np.ascontiguousarray(pygame.surfarray.array2d(copy).T)
+            self._score_pixels = (text, pixels, rect.x, rect.y)
+        return self._score_pixels[1:]
 
     def _plain_pixel(self, color) -> int | None:
         """The pixel gfxdraw writes for ``color`` if it is an opaque RGB colour; None if it would blend."""

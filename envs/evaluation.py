@@ -199,17 +199,18 @@ def trace_episode(problem: Problem, params: np.ndarray, seed: int, env_index: in
     and the Frobenius norm of each dense layer's current weights (plastic networks only)."""
     trace = Trace(problem.spec.env_ids[env_index], seed)
     tracker = track_torso(problem.envs[env_index])
-    net = getattr(problem.policy, "net", problem.net)  # behind a front end (--reservoir), the network's own
+    policy = problem.policy
 
     def observe(t: int, reward: float, state, info: dict) -> None:
         trace.rewards.append(reward)
         if tracker is not None:
             trace.distances.append(tracker.distance)
             trace.forward.append(tracker.forward)
-        if hasattr(state, "layer_weights"):  # static networks keep their weights: nothing to draw
-            trace.layer_norms.append([float(np.linalg.norm(w)) for w in state.layer_weights(net)])
+        weights = policy.layer_weights(state)
+        if weights is not None:  # static networks keep their weights: nothing to draw
+            trace.layer_norms.append([float(np.linalg.norm(w)) for w in weights])
 
-    trace.episode = rollout(tracker or problem.envs[env_index], problem.policy, params, seed, observe)
+    trace.episode = rollout(tracker or problem.envs[env_index], policy, params, seed, observe)
     if trace.layer_norms:
-        trace.layer_shapes = list(net.layer_shapes)
+        trace.layer_shapes = list(policy.net.layer_shapes)  # behind a front end (--reservoir), the head's
     return trace

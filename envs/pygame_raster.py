@@ -25,17 +25,18 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.extending import overload
 
-_FLAGS = dict(cache=True, nogil=True)
+_FLAGS = {"cache": True, "nogil": True}
 _U32 = 0xFFFFFFFF
 _RED, _GREEN, _BLUE = 0xFF0000, 0x00FF00, 0x0000FF
 LARGEST_COORDINATE = 16383  # 65536 * (x2 - x1) stays within a C int
 
 
 @njit(**_FLAGS)
-def _row(pixels, flip, y):
-    return pixels.shape[0] - 1 - y if flip else y
+def _row(height, flip, y):
+    return height - 1 - y if flip else y
 
 
 @njit(**_FLAGS)
@@ -49,15 +50,89 @@ def _blend_channel(old, new, mask, shift, alpha):
 @njit(**_FLAGS)
 def _blend_pixel(pixels, flip, x, y, color, alpha):
     """``_putPixelAlpha``: clipped; written as is at alpha 255, blended below (the surface has no alpha)."""
-    if x < 0 or x >= pixels.shape[1] or y < 0 or y >= pixels.shape[0]:
+    height, width = _size(pixels)
+    if x < 0 or x >= width or y < 0 or y >= height:
         return
-    row = _row(pixels, flip, y)
     if alpha == 255:
-        pixels[row, x] = color
-        return
-    old = np.int64(pixels[row, x])
-    pixels[row, x] = (_blend_channel(old, color, _RED, 16, alpha) | _blend_channel(old, color, _GREEN, 8, alpha)
-                      | _blend_channel(old, color, _BLUE, 0, alpha))
+        _put_span(pixels, flip, y, x, x, color)
+    else:
+        _put_blend(pixels, flip, x, y, color, alpha)
+
+
+@njit(**_FLAGS)
+def blend(old, color, alpha):
+    """The pixel ``_putPixelAlpha`` makes of ``old`` under ``color`` at ``alpha`` < 255."""
+    old = np.int64(old)
+    return (_blend_channel(old, color, _RED, 16, alpha) | _blend_channel(old, color, _GREEN, 8, alpha)
+            | _blend_channel(old, color, _BLUE, 0, alpha))
+
+
+# --- the two targets ---------------------------------------------------------------------------
+# A target is either a (height, width) uint32 array of pixels, written at once, or a span list
+# ``(records, counts, height, width)``: row y's writes, in order, are ``records[y, :counts[y]]``,
+# each one int64 (``span_record``; width at most 1024, colours of 24 bits). Past a row's capacity
+# writes are counted, not stored, so that the caller can grow the list and draw again. The drawing
+# code is the same for both.
+
+SPAN_BITS = 10  # bits of x1 and of x2 in a span record
+
+
+@njit(**_FLAGS)
+def span_record(x1, x2, color, alpha):
+    """One span in an int64: x1 and x2 (10 bits each), alpha (8 bits, 255: opaque), colour (24 bits)."""
+    return np.int64(x1) | (np.int64(x2) << 10) | (np.int64(alpha) << 20) | ((np.int64(color) & 0xFFFFFF) << 28)
+
+
+def _size(target):
+    """(height, width) of a target."""
+
+
+def _put_span(target, flip, y, x1, x2, color):
+    """Opaque pixels x1..x2 (clipped, ordered) of row y."""
+
+
+def _put_blend(target, flip, x, y, color, alpha):
+    """One pixel (clipped) blended at alpha < 255."""
+
+
+@overload(_size, jit_options=_FLAGS)
+def _size_overload(target):
+    if isinstance(target, types.Array):
+        return lambda target: (target.shape[0], target.shape[1])
+    return lambda target: (target[2], target[3])
+
+
+@overload(_put_span, jit_options=_FLAGS)
+def _put_span_overload(target, flip, y, x1, x2, color):
+    if isinstance(target, types.Array):
+        def write(target, flip, y, x1, x2, color):
+            target[_row(target.shape[0], flip, y), x1:x2 + 1] = color
+        return write
+
+    def record(target, flip, y, x1, x2, color):
+        _record(target[0], target[1], _row(target[2], flip, y), x1, x2, color, 255)
+    return record
+
+
+@overload(_put_blend, jit_options=_FLAGS)
+def _put_blend_overload(target, flip, x, y, color, alpha):
+    if isinstance(target, types.Array):
+        def write(target, flip, x, y, color, alpha):
+            row = _row(target.shape[0], flip, y)
+            target[row, x] = blend(target[row, x], color, alpha)
+        return write
+
+    def record(target, flip, x, y, color, alpha):
+        _record(target[0], target[1], _row(target[2], flip, y), x, x, color, alpha)
+    return record
+
+
+@njit(**_FLAGS)
+def _record(records, counts, row, x1, x2, color, alpha):
+    index = counts[row]
+    counts[row] = index + 1
+    if index < records.shape[1]:
+        records[row, index] = span_record(x1, x2, color, alpha)
 
 
 @njit(**_FLAGS)
@@ -65,10 +140,10 @@ def _gfx_hline(pixels, flip, x1, x2, y, color):
     """SDL_gfx's ``hlineColor`` at alpha 255: ends in either order, both included, clipped."""
     if x1 > x2:
         x1, x2 = x2, x1
-    width, height = pixels.shape[1], pixels.shape[0]
+    height, width = _size(pixels)
     if x2 < 0 or x1 > width - 1 or y < 0 or y > height - 1:
         return
-    pixels[_row(pixels, flip, y), max(x1, 0):min(x2, width - 1) + 1] = color
+    _put_span(pixels, flip, y, max(x1, 0), min(x2, width - 1), color)
 
 
 @njit(**_FLAGS)
@@ -76,10 +151,11 @@ def _gfx_vline(pixels, flip, x, y1, y2, color):
     """SDL_gfx's ``vlineColor`` at alpha 255."""
     if y1 > y2:
         y1, y2 = y2, y1
-    if x < 0 or x > pixels.shape[1] - 1 or y2 < 0 or y1 > pixels.shape[0] - 1:
+    height, width = _size(pixels)
+    if x < 0 or x > width - 1 or y2 < 0 or y1 > height - 1:
         return
-    for y in range(max(y1, 0), min(y2, pixels.shape[0] - 1) + 1):
-        pixels[_row(pixels, flip, y), x] = color
+    for y in range(max(y1, 0), min(y2, height - 1) + 1):
+        _put_span(pixels, flip, y, x, x, color)
 
 
 @njit(**_FLAGS)
@@ -126,7 +202,7 @@ def gfx_filled_polygon(pixels, flip, xs, ys, color):
     low, high = ys.min(), ys.max()
     crossings = np.empty(count, dtype=np.int64)
     # rows off the surface draw nothing: skip them instead of scanning them
-    for y in range(max(low, 0), min(high, pixels.shape[0] - 1) + 1):
+    for y in range(max(low, 0), min(high, _size(pixels)[0] - 1) + 1):
         found = _row_crossings(xs, ys, y, high, crossings, True)
         for i in range(0, found - 1, 2):
             left = crossings[i] + 1
@@ -186,7 +262,8 @@ def _clip_line(x1, y1, x2, y2, right, bottom):
 @njit(**_FLAGS)
 def _gfx_aaline(pixels, flip, x1, y1, x2, y2, color):
     """SDL_gfx's ``_aalineColor`` without its end point, at alpha 255 (``color``: a mapped pixel)."""
-    draw, x1, y1, x2, y2 = _clip_line(x1, y1, x2, y2, pixels.shape[1] - 1, pixels.shape[0] - 1)
+    height, width = _size(pixels)
+    draw, x1, y1, x2, y2 = _clip_line(x1, y1, x2, y2, width - 1, height - 1)
     if not draw:
         return
     x0, y0, x_end, y_end = x1, y1, x2, y2
@@ -243,14 +320,15 @@ def gfx_aapolygon(pixels, flip, xs, ys, color):
 @njit(**_FLAGS)
 def _draw_hline(pixels, flip, x1, y, x2, color):
     """pygame's ``drawhorzlineclipbounding``."""
-    if y < 0 or y >= pixels.shape[0]:
+    height, width = _size(pixels)
+    if y < 0 or y >= height:
         return
     if x2 < x1:
         x1, x2 = x2, x1
-    x1, x2 = max(x1, 0), min(x2, pixels.shape[1] - 1)
-    if x2 < 0 or x1 >= pixels.shape[1]:
+    x1, x2 = max(x1, 0), min(x2, width - 1)
+    if x2 < 0 or x1 >= width:
         return
-    pixels[_row(pixels, flip, y), x1:x2 + 1] = color
+    _put_span(pixels, flip, y, x1, x2, color)
 
 
 @njit(**_FLAGS)
@@ -262,7 +340,7 @@ def draw_polygon(pixels, flip, xs, ys, color):
         _draw_hline(pixels, flip, xs.min(), low, xs.max(), color)
         return
     crossings = np.empty(count, dtype=np.int64)
-    for y in range(max(low, 0), min(high, pixels.shape[0] - 1) + 1):
+    for y in range(max(low, 0), min(high, _size(pixels)[0] - 1) + 1):
         found = _row_crossings(xs, ys, y, high, crossings, False)
         for i in range(0, found - 1, 2):
             _draw_hline(pixels, flip, crossings[i], y, crossings[i + 1], color)

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Callable
+from dataclasses import dataclass, field
+from typing import Any, Callable
 
 import gymnasium as gym
 import numpy as np
@@ -13,6 +13,7 @@ import numpy as np
 class Episode:
     total_return: float
     steps: int  # environment steps, burn-in included
+    state: Any = field(default=None, repr=False, compare=False)  # the policy's, when the episode ended
 
 
 def episode_rng(seed: int) -> np.random.Generator:
@@ -49,4 +50,4 @@ def rollout(env: gym.Env, policy, params: np.ndarray, seed: int,
             observer(steps, float(reward), state, info)
         if terminated or truncated or steps == limit:
             break
-    return Episode(float(total), steps + burn_in)
+    return Episode(float(total), steps + burn_in, state)

@@ -189,21 +189,18 @@ METRICS_COLUMNS = ("generation", "fitness_mean", "fitness_max", "fitness_min", "
                    "nonfinite", "env_steps", "total_env_steps", "seconds", "total_seconds",
                    "center_rank", "center_eval_mean", "center_eval_std", "episode_cap")
 LATER_COLUMNS = ("center_rank", "center_eval_mean", "center_eval_std", "episode_cap")  # absent from earlier files
-# columns of some runs only (the centre's evolved reservoir hyperparameters, ``--reservoir_evolve``)
-OPTIONAL_COLUMNS = ("reservoir_lr", "reservoir_sr", "reservoir_iss")
 
 
-def write_metrics(path: Path, rows: list[dict]) -> None:
+def write_metrics(path: Path, rows: list[dict], extra_columns: tuple[str, ...] = ()) -> None:
     """Rewrite metrics.csv whole (atomically): it is small, and a resume must drop later rows.
-    Rows read back from a metrics.csv of an earlier version lack the later columns: left empty. The
-    optional columns are written when a row has them."""
-    optional = tuple(key for key in OPTIONAL_COLUMNS if any(key in row for row in rows))
+    Rows read back from a metrics.csv of an earlier version lack the later columns: left empty.
+    ``extra_columns`` are the policy kind's own (``Policy.metrics_columns``), after the common ones."""
     buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=METRICS_COLUMNS + optional)
+    writer = csv.DictWriter(buffer, fieldnames=METRICS_COLUMNS + tuple(extra_columns))
     writer.writeheader()
     for row in rows:
         writer.writerow({key: row.get(key, "") if key in LATER_COLUMNS else row[key] for key in METRICS_COLUMNS}
-                        | {key: row.get(key, "") for key in optional})
+                        | {key: row.get(key, "") for key in extra_columns})
     atomic_write_text(path, buffer.getvalue())
 
 

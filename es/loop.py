@@ -53,13 +53,6 @@ class Status(enum.Enum):
     FAILED = "failed"  # an episode failed twice, a worker could not start, or a file could not be written
 
 
-def evolved_values(policy, theta: np.ndarray) -> dict[str, float]:
-    """Settings a policy evolves beside its weights, decoded from the centre (the reservoir's
-    hyperparameters with ``--reservoir_evolve``): more metrics columns; {} for most policies."""
-    decode = getattr(policy, "evolved_values", None)
-    return decode(theta) if decode is not None else {}
-
-
 GENERATION_STREAM = 2  # the perturbations and episode seeds; the options' streams are others
 
 
@@ -230,11 +223,11 @@ class Trainer:
                    seconds=round(seconds, 3), total_seconds=round(history.total_seconds, 3),
                    parameters_name=self.policy.penalised_name, parameters_sum=float(penalised.sum()),
                    parameters_abs_sum=float(np.abs(penalised).sum()), episode_cap=episode_cap,
-                   population=self.es.popsize, **evolved_values(self.policy, after.theta))
+                   population=self.es.popsize, **self.policy.evolved_values(after.theta))
         history.metrics.append(row)
         if after.generation % self.run.print_every == 0:
             history.fitness_log.append(row["fitness_mean"])
-        self.folder.write_metrics(history.metrics)
+        self.folder.write_metrics(history.metrics, self.policy.metrics_columns)
         for reporter in self.reporters:
             reporter.generation(row)
         return row

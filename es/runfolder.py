@@ -238,11 +238,11 @@ class RunFolder:
         weight_role = policy.roles[0]  # the file evaluate_*.py is given: static weights, Hebbian coefficients
         if observations is not None:
             for name in (names[weight_role], named_file("last", weight_role)):
-                self.save_statistics(name, observations, policy.clip)
+                self.save_statistics(name, observations, policy.obs_clip)
         if history.best_theta is not None:
             self.save_named("best", policy.export(history.best_theta))
             if history.best_observations is not None:
-                self.save_statistics(named_file("best", weight_role), history.best_observations, policy.clip)
+                self.save_statistics(named_file("best", weight_role), history.best_observations, policy.obs_clip)
         self.save_fitness_log(label, history.fitness_log)
 
     def save_statistics(self, weight_file: str, observations: RunningStat, clip: float | None) -> None:
@@ -275,8 +275,8 @@ class RunFolder:
     def write_config(self, data: dict) -> None:
         self.write(files.write_json, "config.json", data)
 
-    def write_metrics(self, rows: list[dict]) -> None:
-        self.write(files.write_metrics, "metrics.csv", rows)
+    def write_metrics(self, rows: list[dict], extra_columns: tuple[str, ...] = ()) -> None:
+        self.write(files.write_metrics, "metrics.csv", rows, extra_columns)
 
     def read_metrics(self, up_to_generation: int) -> list[dict]:
         """The rows up to a generation; rows a kill left after the checkpoint are dropped."""

@@ -105,9 +105,9 @@ class Worker:
             params = self.params(generation, sigma, int(task["member"]), int(task["noise_index"]), int(task["sign"]))
             policy = self.problem.policy
             if statistics is not None:
-                policy.observe(statistics, record=bool(task["record_obs"]))
+                policy.observe(statistics)
             episode = self.problem.evaluate(params, env_index, int(task["seed"]), int(task["max_steps"]) or None)
-            sums = policy.recorded() if statistics is not None else None
+            sums = policy.observation_sums(episode.state) if statistics is not None and task["record_obs"] else None
             return "result", (episode.total_return, episode.steps, self._penalty, sums)
         except Exception as error:  # reported to the runner, which retries once, then stops the run
             message = f"{type(error).__name__}: {error}"

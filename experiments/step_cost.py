@@ -7,8 +7,8 @@
 A real training run's first generations are no guide: random networks end their episodes early
 (CarRacing after 21 steps without a new tile, the ant after step 201 + 31 steps without progress),
 while a trained one runs all 1000 steps. So this measures, per environment, the CPU time of one
-policy step (``policy.act`` + ``env.step`` through the recipe's wrappers, generation-0 parameters)
-and of one reset (the ant's 40-step burn-in included), in this process's CPU time so that other
+policy step (``policy.act`` + ``env.step`` through the recipe's wrappers, generation-0 parameters,
+in the project's one episode loop, ``envs.rollout``) and of one reset (the ant's 40-step burn-in included), in this process's CPU time so that other
 load on the machine does not inflate it, and projects
 
     seconds per generation = (popsize + 1) x sum over envs (reset + length x step) / workers
@@ -29,33 +29,33 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from envs import ProblemSpec, resolve_env_id  # noqa: E402
+from envs import ProblemSpec, episode_rng, resolve_env_id, rollout  # noqa: E402
 from policies import PolicySettings
 
 
-def step_and_reset_cost(problem, env_index: int, steps: int) -> tuple[float, float]:
-    """CPU seconds per policy step and per reset, resetting whenever an episode ends."""
+def reset_cost(problem, env_index: int, resets: int = 5) -> float:
+    """CPU seconds per reset: the environment's (the ant's burn-in included) and the policy's."""
     env, policy = problem.envs[env_index], problem.policy
     params = policy.initial_params(np.random.default_rng(0))
-    observation, _ = env.reset(seed=0)  # untimed: the first act compiles the numba kernels
-    env.step(policy.act(params, policy.reset(params, np.random.default_rng(0)), observation)[0])
-    step_time = reset_time = 0.0
-    done_steps, resets, seed = 0, 0, 0
+    started = time.process_time()
+    for seed in range(resets):
+        env.reset(seed=seed)
+        policy.reset(params, episode_rng(seed))
+    return (time.process_time() - started) / resets
+
+
+def step_and_reset_cost(problem, env_index: int, steps: int) -> tuple[float, float]:
+    """CPU seconds per policy step and per reset: whole episodes of the project's one loop
+    (``envs.rollout``), the last one cut at ``steps`` policy steps, less their resets."""
+    env, policy, burn_in = problem.envs[env_index], problem.policy, problem.recipes[env_index].burn_in
+    params = policy.initial_params(np.random.default_rng(0))
+    rollout(env, policy, params, seed=0, max_steps=burn_in + 1)  # untimed: the first act compiles the numba kernels
+    reset = reset_cost(problem, env_index)
+    done_steps, episodes, started = 0, 0, time.process_time()
     while done_steps < steps:
-        started = time.process_time()
-        observation, _ = env.reset(seed=seed)
-        state = policy.reset(params, np.random.default_rng(seed))
-        reset_time += time.process_time() - started
-        resets, seed = resets + 1, seed + 1
-        started = time.process_time()
-        while done_steps < steps:
-            output, state = policy.act(params, state, observation)
-            observation, _, terminated, truncated, _ = env.step(output)
-            done_steps += 1
-            if terminated or truncated:
-                break
-        step_time += time.process_time() - started
-    return step_time / done_steps, reset_time / resets
+        episode = rollout(env, policy, params, seed=episodes, max_steps=burn_in + steps - done_steps)
+        done_steps, episodes = done_steps + episode.steps - burn_in, episodes + 1
+    return (time.process_time() - started - episodes * reset) / done_steps, reset
 
 
 def main() -> int:

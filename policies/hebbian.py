@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from policies.base import Policy
 from policies.conv import ConvFeatures
 from policies.init import COEVOLVE, INIT_CHOICES, sample_weights
 from policies.kernels import hebbian_forward_update
@@ -48,9 +49,8 @@ class HebbianState:
         return [layer * self.scale[index] for index, layer in enumerate(layers)]
 
 
-class HebbianPolicy:
+class HebbianPolicy(Policy):
     penalised_name = "coeffs"
-    normalised_inputs = 0
 
     def __init__(self, net: NetworkSpec, rule: str = "ABCD_lr", init_weights: str = "uni",
                  normalise: bool = True, distribution: str = "normal"):
@@ -119,6 +119,10 @@ class HebbianPolicy:
         hebbian_forward_update(state.weights, state.folded, state.scale, obs, state.work,
                                *self._sizes, self.net.squash_out, self.normalise)
         return state.out, state
+
+    def layer_weights(self, state: HebbianState) -> list[np.ndarray]:
+        """The weights the episode has grown so far (the adaptation plot's)."""
+        return state.layer_weights(self.net)
 
     # --- files in the original shapes --------------------------------------------------------
 

@@ -16,68 +16,70 @@ compute (es-starter stores them in the policy and saves them with its weights):
   [0, 1]; ``policies.registry`` skips them and the scripts say so).
 
 The statistics are set per generation from what the runner published (``observe``), never
-changed within an episode, and the wrapper adds up the raw observations of the episodes it is
-asked to record. One compiled call per step does both.
+changed within an episode. What an episode adds up of the raw observations (for the runner's
+running statistics) lives in the episode's own state, not in the policy, so the policy is the same
+function for every episode it runs; the runner asks for the sums it records (``observation_sums``).
+One compiled call per step normalises and adds up.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any
+
 import numpy as np
 from numba import njit
 
-from policies.base import Policy
+from policies.base import FrontEnd, Policy, Statistics, Sums
 
 
 @njit(cache=True, nogil=True)
-def _normalise(obs, mean, std, clip, out, total, squares, record):
-    """out = clip((obs - mean) / std, -clip, clip); with ``record``, add obs and obs^2 to the sums."""
+def _normalise(obs, mean, std, clip, out, total, squares):
+    """out = clip((obs - mean) / std, -clip, clip); add obs and obs^2 to the sums."""
     for index in range(out.shape[0]):
         value = np.float64(obs[index])
-        if record:
-            total[index] += value
-            squares[index] += value * value
+        total[index] += value
+        squares[index] += value * value
         scaled = (value - mean[index]) / std[index]
         out[index] = min(max(scaled, -clip), clip)
 
 
-class NormalisedInputs:
-    """``policy`` acting on normalised observations; every other attribute is the wrapped policy's."""
+@dataclass
+class NormalisedState:
+    inner: Any  # the wrapped policy's episode state
+    out: np.ndarray  # float32: the normalised observation the wrapped policy reads
+    total: np.ndarray  # the episode's sum of raw observations, float64
+    squares: np.ndarray  # and of their squares
+    count: int = 0  # how many it added up
+
+
+class NormalisedInputs(FrontEnd):
+    """``policy`` acting on normalised observations."""
 
     def __init__(self, policy: Policy, size: int, clip: float | None = None):
-        self.inner = policy
+        super().__init__(policy)
         self.normalised_inputs = size
-        self.clip = clip
+        self.obs_clip = clip
         self._clip = np.inf if clip is None else float(clip)
         self._mean, self._std = np.zeros(size), np.ones(size)  # no data yet: the identity
-        self._out = np.zeros(size, dtype=np.float32)
-        self._recording = False
-        self._total, self._squares, self._count = np.zeros(size), np.zeros(size), 0
 
-    def __getattr__(self, name: str):
-        if name == "inner":  # not set yet (e.g. while unpickling): no recursion
-            raise AttributeError(name)
-        return getattr(self.inner, name)
-
-    def observe(self, statistics: tuple[np.ndarray, np.ndarray], record: bool = False) -> None:
-        """Normalise with (mean, std) from now on; ``record``: add up the next episode's observations."""
+    def observe(self, statistics: Statistics) -> None:
         mean, std = statistics
         if mean.shape != (self.normalised_inputs,) or std.shape != mean.shape:
             raise ValueError(f"observation statistics of shape {mean.shape} for a network with "
                              f"{self.normalised_inputs} inputs")
         self._mean, self._std = np.asarray(mean, np.float64), np.asarray(std, np.float64)
-        self._recording = record
 
-    def recorded(self) -> tuple[np.ndarray, np.ndarray, int] | None:
-        """(sum, sum of squares, count) of the last episode's observations, if it was recorded."""
-        return (self._total.copy(), self._squares.copy(), self._count) if self._recording else None
+    def observation_sums(self, state: NormalisedState) -> Sums:
+        return state.total.copy(), state.squares.copy(), state.count
 
-    def reset(self, params: np.ndarray, rng: np.random.Generator):
-        self._total[:] = 0.0
-        self._squares[:] = 0.0
-        self._count = 0
-        return self.inner.reset(params, rng)
+    def reset(self, params: np.ndarray, rng: np.random.Generator) -> NormalisedState:
+        size = self.normalised_inputs
+        return NormalisedState(self.inner.reset(params, rng), np.zeros(size, dtype=np.float32), np.zeros(size),
+                               np.zeros(size))
 
-    def act(self, params: np.ndarray, state, obs: np.ndarray):
-        _normalise(obs, self._mean, self._std, self._clip, self._out, self._total, self._squares, self._recording)
-        self._count += self._recording
-        return self.inner.act(params, state, self._out)
+    def act(self, params: np.ndarray, state: NormalisedState, obs: np.ndarray):
+        _normalise(obs, self._mean, self._std, self._clip, state.out, state.total, state.squares)
+        state.count += 1
+        output, state.inner = self.inner.act(params, state.inner, state.out)
+        return output, state

@@ -128,7 +128,7 @@ def make_policy(settings: PolicySettings, net: NetworkSpec, normalise: bool = Tr
 
 
 def reservoir_front_end(settings: PolicySettings, net: NetworkSpec, normalise: bool) -> ReservoirFrontEnd:
-    from reservoirs import INSTALL_HINT, missing_packages
+    from reservoir_extra import INSTALL_HINT, missing_packages
 
     head = kind_of(settings).build(settings, head_network(net, settings.reservoir_units), normalise)
     if missing_packages({"reservoirpy": "reservoirpy"}):

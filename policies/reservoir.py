@@ -7,7 +7,7 @@ reservoir's state; here the head this tool evolves, static (Salimans et al. 2017
 
 - **The reservoir** is ER-MRL's: the leaky integrator
   x[t+1] = (1 - lr) x[t] + lr tanh(W_in u[t+1] + W x[t] + b), W, W_in and b drawn as reservoirpy 0.3
-  drew them (``reservoirs.esn.ReservoirMatrices``), so a given (units, lr, sr, iss, seed) is the very
+  drew them (``policies.reservoir_matrices``), so a given (units, lr, sr, iss, seed) is the very
   reservoir ER-MRL's scripts build. The state starts at zero at every episode (``reset``); the draws
   are fixed for the run, from ``PolicySettings.reservoir_seed`` (the run's seed unless given), so every
   worker, and a resumed run, regenerates the same matrices from one integer: nothing but the seed
@@ -49,14 +49,15 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from policies.base import Policy
+from policies.base import FrontEnd, Policy
 from policies.network import Layout, NetworkSpec
 from policies.static import check_length
-from reservoirs import SEARCH_BOUNDS
+from reservoir_extra import SEARCH_BOUNDS
 
 ROLE = "reservoir"  # the file role (and layout part) of the evolved hyperparameters
 # ER-MRL's default search bounds, in the order of the genes
 BOUNDS: dict[str, tuple[float, float]] = {name: SEARCH_BOUNDS[name] for name in ("lr", "sr", "iss")}
+EVOLVED_COLUMNS = ("reservoir_lr", "reservoir_sr", "reservoir_iss")  # their metrics columns, in the genes' order
 MAX_UNITS = 10_000  # each worker holds its own matrices, and their eigenvalue solve grows with units^2
 
 
@@ -134,7 +135,7 @@ def reservoir_step(w_data, w_indices, w_indptr, in_data, in_indices, in_indptr, 
 
 @dataclass
 class ReservoirState:
-    head: Any  # the head's own episode state
+    inner: Any  # the head's own episode state
     leak_rate: float
     recurrent: np.ndarray  # W's non-zero entries, scaled for this episode's spectral radius
     inputs: np.ndarray  # W_in's non-zero entries, scaled for this episode's input scaling
@@ -142,73 +143,70 @@ class ReservoirState:
     pre: np.ndarray
     features: np.ndarray  # float32 copy of x: what the head reads
 
-    def __getattr__(self, name: str):
-        """What the head's state offers (a Hebbian head's ``layer_weights``, for the adaptation plot)."""
-        if name == "head":  # not set yet: no recursion
-            raise AttributeError(name)
-        return getattr(self.head, name)
 
-
-class ReservoirFrontEnd:
-    """``head`` (built for ``units`` inputs) reading a reservoir that reads the observation."""
-
-    normalised_inputs = 0
+class ReservoirFrontEnd(FrontEnd):
+    """``head`` (built for ``units`` inputs) reading a reservoir that reads the observation; the head
+    is the front end's ``inner`` policy."""
 
     def __init__(self, head: Policy, input_dim: int, units: int, values: Hyperparameters, seed: int,
                  evolve: bool = False):
-        from reservoirs.esn import ReservoirMatrices  # reservoirpy: the caller has checked it is installed
+        from policies.reservoir_matrices import ReservoirMatrices  # reservoirpy: the caller has checked it is there
 
-        self.head, self.units, self.values, self.evolve = head, units, values, evolve  # checked by PolicySettings
-        self.net = head.net  # the network the evolved weights define (the adaptation plot's layers)
+        super().__init__(head)
+        self.units, self.values, self.seed, self.evolve = units, values, seed, evolve  # checked by PolicySettings
         self.matrices = ReservoirMatrices.generate(units, input_dim, seed)
         self._bias = self.matrices.bias.toarray().ravel()
-        parts = [(name, part.shape) for name, part in head.layout.parts.items()]
-        self.layout = Layout(parts + ([(ROLE, (len(BOUNDS),))] if evolve else []))
-        self.num_params = self.layout.size
-        self._head = slice(0, head.num_params)
-        self.penalised, self.penalised_name = head.penalised, head.penalised_name
-        self.roles = head.roles + ((ROLE,) if evolve else ())
+        if evolve:
+            parts = [(name, part.shape) for name, part in head.layout.parts.items()]
+            self.layout = Layout(parts + [(ROLE, (len(BOUNDS),))])
+            self.num_params = self.layout.size
+            self.roles = head.roles + (ROLE,)
+            self.metrics_columns = head.metrics_columns + EVOLVED_COLUMNS
 
     def hyperparameters(self, params: np.ndarray) -> Hyperparameters:
         """The reservoir's hyperparameters for ``params``: decoded from its genes, or the fixed ones."""
         return hyperparameters(self.layout.view(params, ROLE)) if self.evolve else self.values
 
     def evolved_values(self, params: np.ndarray) -> dict[str, float]:
-        """The evolved hyperparameters ``params`` encode, as metrics columns (``es.files.OPTIONAL_COLUMNS``);
-        {} when they are given, not evolved."""
-        if not self.evolve:
-            return {}
-        values = self.hyperparameters(params)
-        return {"reservoir_lr": values.leak_rate, "reservoir_sr": values.spectral_radius,
-                "reservoir_iss": values.input_scaling}
+        """The evolved hyperparameters ``params`` encode, as metrics columns (``EVOLVED_COLUMNS``)."""
+        values = super().evolved_values(params)
+        if self.evolve:
+            decoded = self.hyperparameters(params)
+            values |= dict(zip(EVOLVED_COLUMNS, (decoded.leak_rate, decoded.spectral_radius, decoded.input_scaling)))
+        return values
+
+    def describe_front_ends(self, params: np.ndarray) -> list[str]:
+        evolved = " (evolved)" if self.evolve else ""
+        return [f"reservoir: {self.units} units, seed {self.seed}, {self.hyperparameters(params).describe()}{evolved}",
+                *super().describe_front_ends(params)]
 
     def initial_params(self, rng: np.random.Generator) -> np.ndarray:
-        head = self.head.initial_params(rng)
+        head = self.inner.initial_params(rng)
         return np.concatenate([head, genes(self.values)]) if self.evolve else head
 
     def reset(self, params: np.ndarray, rng: np.random.Generator) -> ReservoirState:
         values = self.hyperparameters(params)
         recurrent = self.matrices.recurrent.data * self.matrices.recurrent_factor(values.spectral_radius)
         inputs = self.matrices.input_signs.data * values.input_scaling
-        return ReservoirState(self.head.reset(params[self._head], rng), values.leak_rate, recurrent, inputs,
+        return ReservoirState(self.inner.reset(params[self._inner], rng), values.leak_rate, recurrent, inputs,
                               np.zeros(self.units), np.zeros(self.units), np.zeros(self.units, dtype=np.float32))
 
     def act(self, params: np.ndarray, state: ReservoirState, obs: np.ndarray):
         matrices = self.matrices
         reservoir_step(state.recurrent, matrices.recurrent.indices, matrices.recurrent.indptr, state.inputs,
-                       matrices.input_signs.indices, matrices.input_signs.indptr, self._bias, state.leak_rate, obs, state.state,
-                       state.pre, state.features)
-        output, state.head = self.head.act(params[self._head], state.head, state.features)
+                       matrices.input_signs.indices, matrices.input_signs.indptr, self._bias, state.leak_rate, obs,
+                       state.state, state.pre, state.features)
+        output, state.inner = self.inner.act(params[self._inner], state.inner, state.features)
         return output, state
 
     def export(self, params: np.ndarray) -> dict[str, np.ndarray]:
-        arrays = self.head.export(params[self._head])
+        arrays = super().export(params)
         if self.evolve:
             arrays[ROLE] = np.array(self.layout.view(params, ROLE), dtype=np.float32)
         return arrays
 
     def load(self, arrays: dict[str, np.ndarray]) -> np.ndarray:
-        head = self.head.load(arrays)
+        head = self.inner.load(arrays)
         if not self.evolve:
             return head
         if arrays.get(ROLE) is None:
@@ -216,9 +214,6 @@ class ReservoirFrontEnd:
                              f"hyperparameters too, --path_reservoir (best_{ROLE}.dat or last_{ROLE}.dat)")
         return np.concatenate([head, check_length("the --path_reservoir file", arrays[ROLE], len(BOUNDS),
                                                   "the reservoir's genes (lr, sr, iss)")])
-
-    def file_name(self, role: str, env: str, reward: int, population: int, generation: int) -> str:
-        return self.head.file_name(role, env, reward, population, generation)
 
 
 def head_network(net: NetworkSpec, units: int) -> NetworkSpec:

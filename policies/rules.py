@@ -49,16 +49,6 @@ class Rule:
         named = {name: coeffs[..., column] for column, name in enumerate(self.columns)}
         return {name: named.get(name, _ABSENT[name]) for name in TERMS}
 
-    def delta(self, coeffs: np.ndarray, pre: np.ndarray, post: np.ndarray) -> np.ndarray:
-        """Weight change of one layer, vectorised.
-
-        ``coeffs`` is (n_out, n_in, n_coeffs), ``pre`` (n_in,), ``post`` (n_out,); the result has the
-        (n_out, n_in) shape of the weight matrix.
-        """
-        t = self.terms(coeffs)
-        o_i, o_j = pre[None, :], post[:, None]
-        return t["eta"] * (t["A"] * o_i * o_j + t["B"] * o_i + t["C"] * o_j + t["D_in"]) + t["D_out"]
-
     def fold(self, coeffs: np.ndarray) -> np.ndarray:
         """The four per-synapse factors (a, b, c, d) of  dw = (a o_j + b) o_i + c o_j + d.
 

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from policies.base import Policy
 from policies.conv import ConvFeatures
 from policies.init import default_init
 from policies.kernels import static_forward
@@ -39,14 +40,13 @@ def check_length(name: str, array: np.ndarray, expected: int, what: str) -> np.n
     return array.reshape(-1).astype(np.float32)
 
 
-class WeightFile:
+class WeightFile(Policy):
     """One flat weight vector in one ``.dat`` file, named as the original ES code named it; every
     weight is penalised by the L2 term."""
 
     penalised_name = "w"
     roles = ("weights",)
     num_params: int
-    normalised_inputs = 0
 
     def export(self, params: np.ndarray) -> dict[str, np.ndarray]:
         return {"weights": np.asarray(params, dtype=np.float32).copy()}

@@ -16,7 +16,7 @@ import importlib.util
 import math
 from pathlib import Path
 
-from es.files import METRICS_COLUMNS, OPTIONAL_COLUMNS
+from es.files import METRICS_COLUMNS
 
 FOLDER = "tensorboard"
 INSTALL_HINT = "pip install -r requirements-tensorboard.txt (or pip install -e .[tensorboard])"
@@ -26,10 +26,10 @@ def available() -> bool:
     return importlib.util.find_spec("tensorboard") is not None
 
 
-def scalars(row: dict) -> dict[str, float]:
-    """The row's numeric, finite columns, but the step itself."""
+def scalars(row: dict, extra_columns: tuple[str, ...] = ()) -> dict[str, float]:
+    """The row's numeric, finite columns, but the step itself; ``extra_columns``: the policy kind's."""
     found = {}
-    for name in METRICS_COLUMNS[1:] + OPTIONAL_COLUMNS:
+    for name in METRICS_COLUMNS[1:] + tuple(extra_columns):
         try:
             value = float(row.get(name))
         except (TypeError, ValueError):  # absent, empty or not a number
@@ -43,8 +43,9 @@ class TensorBoardLog:
     """Writes each generation's metrics row as scalars; flushes at every save. The writer (and its
     folder) is made at the first generation, so a run that fails to start leaves nothing behind."""
 
-    def __init__(self, run_folder: Path):
+    def __init__(self, run_folder: Path, extra_columns: tuple[str, ...] = ()):
         self.path = Path(run_folder) / FOLDER
+        self.extra_columns = extra_columns  # the policy kind's metrics columns (``Policy.metrics_columns``)
         self.writer = None
 
     def generation(self, row: dict) -> None:
@@ -53,7 +54,7 @@ class TensorBoardLog:
             from torch.utils.tensorboard import SummaryWriter
 
             self.writer = SummaryWriter(log_dir=str(self.path), purge_step=step)
-        for name, value in scalars(row).items():
+        for name, value in scalars(row, self.extra_columns).items():
             self.writer.add_scalar(name, value, step)
 
     def saved(self, folder, rows: list[dict]) -> None:

@@ -32,7 +32,8 @@ from cli.errors import say as log
 from cli.flags import flag_value, positive_float, positive_int, seed_value
 from es.files import atomic_write_bytes, atomic_write_text, write_json
 from es.outputs import check_output
-from reservoirs import SEARCH_BOUNDS, experiments
+from reservoir_extra import SEARCH_BOUNDS
+from reservoirs import experiments
 from reservoirs.esn import ReservoirSettings
 from reservoirs.experiments import ENV_TYPES, TARGET_RETURN, SearchSpace, env_ids_for, reservoirs_from_params
 from reservoirs.study import (
@@ -462,6 +463,6 @@ def main(script: str, argv: list[str] | None = None) -> int:
     except USER_ERRORS as error:
         print(f"{prog}: error: {error}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:  # Ctrl-C, or SIGTERM (reservoirs.run_script), outside a study's trials
+    except KeyboardInterrupt:  # Ctrl-C, or SIGTERM (reservoirs.launch.run_script), outside a study's trials
         print(f"{prog}: stopped", file=sys.stderr)
         return 130

@@ -15,13 +15,14 @@ import gymnasium as gym
 import numpy as np
 import pygame
 import pytest
+from gymnasium.envs.box2d.car_racing import PLAYFIELD, CarRacing
 from pygame import gfxdraw
 
 import envs
 from envs import pygame_raster
 from envs.car_racing import FastCarRacing, box2d_transform, covers_screen, pygame_pixels, rotate_like_pygame
+from envs.car_racing_observation import SpanObservation
 from envs.make import STOCK_CAR_RACING_ID as STOCK_ID
-from gymnasium.envs.box2d.car_racing import CarRacing, PLAYFIELD
 
 
 def pair(render_mode: str | None = None, **kwargs) -> tuple[gym.Env, gym.Env]:
@@ -72,6 +73,63 @@ def test_leaving_the_playfield_ends_with_minus_100_and_stepping_on_still_matches
         assert np.array_equal(expected[0], got[0]) and expected[1:] == got[1:]
     unwrapped = fast.unwrapped
     assert not unwrapped._draw_compiled(*unwrapped._camera())
+
+
+def track_driver(speed: float, ahead: int):
+    """Steers toward the track ``ahead`` tiles on from the nearest (backwards when negative) at ``speed``."""
+    def act(car_racing) -> np.ndarray:
+        car, track = car_racing.car, np.array([point[2:4] for point in car_racing.track])
+        x, y = car.hull.position
+        nearest = int(np.argmin(np.hypot(track[:, 0] - x, track[:, 1] - y)))
+        target_x, target_y = track[(nearest + ahead) % len(track)]
+        error = math.atan2(target_y - y, target_x - x) - (car.hull.angle + math.pi / 2)
+        error = (error + math.pi) % (2 * math.pi) - math.pi
+        velocity = float(np.hypot(*car.hull.linearVelocity))
+        return np.array([np.clip(-2 * error, -1, 1), 0.4 if velocity < speed else 0.0,
+                         0.3 if velocity > 1.3 * speed else 0.0], dtype=np.float32)
+    return act
+
+
+def assert_same_long_episode(seed: int, driver, steps: int, frame_every: int) -> tuple[int, float, dict]:
+    """Both classes for up to ``steps`` steps (no time limit), every observation and transition and
+    every ``frame_every``-th ``rgb_array`` frame equal; (steps run, return, last info)."""
+    stock, fast = pair("rgb_array", max_episode_steps=steps)
+    assert np.array_equal(stock.reset(seed=seed)[0], fast.reset(seed=seed)[0])
+    total = 0.0
+    for step in range(steps):
+        action = driver(stock.unwrapped, step)
+        expected, got = stock.step(action), fast.step(action)
+        assert np.array_equal(expected[0], got[0]), f"seed {seed}: observations differ at step {step}"
+        assert expected[1:] == got[1:], f"seed {seed}, step {step}: {expected[1:]} != {got[1:]}"
+        if step % frame_every == 0 or expected[2]:
+            assert np.array_equal(stock.render(), fast.render()), f"seed {seed}: frames differ at step {step}"
+        total += expected[1]
+        if expected[2] or expected[3]:
+            break
+    return step + 1, total, expected[4]
+
+
+def test_a_whole_lap_step_by_step():
+    """The zoom-in, then a lap driven along the track to its end (every tile visited): 1025 steps."""
+    follow = track_driver(45.0, 6)
+    steps, total, info = assert_same_long_episode(3, lambda env, step: follow(env), 1100, 50)
+    assert steps > 1000 and info == {"lap_finished": True} and total > 850
+
+
+def test_spinning_reversing_and_leaving_the_track_step_by_step():
+    """Spins on the spot, turns round and drives the track backwards, then off it onto the grass:
+    1100 steps."""
+    backwards = track_driver(30.0, -6)
+
+    def driver(env, step):
+        if step < 120:  # full throttle, full lock: the rear wheels spin and the car turns round
+            return np.array([1.0, 1.0, 0.0], dtype=np.float32)
+        if step < 800:
+            return backwards(env)
+        return np.array([0.3, 0.6, 0.0], dtype=np.float32)  # off the track, across the grass
+
+    steps, _, _ = assert_same_long_episode(4, driver, 1100, 50)
+    assert steps == 1100
 
 
 def test_hard_turns():
@@ -164,6 +222,78 @@ def test_compiled_drawing_writes_pygames_pixels(name):
             pixels[:] = pixels[::-1].copy() if flip else pixels
             del pixels
             assert np.array_equal(pygame.surfarray.array2d(got), pygame.surfarray.array2d(expected)), (points, flip)
+
+
+def test_span_observation_is_smoothscale_of_pygames_drawing():
+    """Polygons recorded as spans and shrunk from them give what pygame draws and smoothscale shrinks,
+    flipped or not, with a text block, at CarRacing's sizes (1000 x 800 -> 96 x 96)."""
+    rng = np.random.default_rng(30)
+    width, height = 1000, 800
+    spans = SpanObservation(width, height, 96, 96, capacity=4)  # small: the list must grow
+    for trial in range(6):
+        count = int(rng.integers(1, 40))
+        polygons = [random_polygon(rng, width, height) for _ in range(count)]
+        colors = [tuple(int(c) for c in rng.integers(0, 256, size=3)) for _ in range(count)]
+        smooth = rng.random(count) < 0.7
+        background = tuple(int(c) for c in rng.integers(0, 256, size=3))
+        text = rng.integers(0, 1 << 24, size=(int(rng.integers(1, 40)), int(rng.integers(1, 90))), dtype=np.uint32)
+        text_x, text_y = int(rng.integers(-20, width - 20)), int(rng.integers(-20, height - 20))
+        flip = bool(trial % 2)
+        expected = pygame.Surface((width, height))
+        expected.fill(background)
+        for points, color, antialiased in zip(polygons, colors, smooth):
+            if antialiased:
+                gfxdraw.aapolygon(expected, points.tolist(), color)
+                gfxdraw.filled_polygon(expected, points.tolist(), color)
+            else:
+                pygame.draw.polygon(expected, color, points.tolist())
+        if flip:
+            expected = pygame.transform.flip(expected, False, True)
+        text_surface = pygame.Surface(text.shape[::-1])
+        pygame.surfarray.blit_array(text_surface, text.T)
+        expected.blit(text_surface, (text_x, text_y))
+        expected = pygame.surfarray.array3d(pygame.transform.smoothscale(expected, (96, 96))).transpose(1, 0, 2)
+
+        corners = np.trunc(np.concatenate(polygons)).astype(np.int64)
+        arguments = (corners[:, 0].copy(), corners[:, 1].copy(), np.cumsum([0] + [len(p) for p in polygons]),
+                     np.array([expected_surface_pixel(c) for c in colors], dtype=np.int64), smooth)
+        while True:
+            spans.record_polygons(spans.target(), flip, *arguments)
+            if not spans.overflowed():
+                break
+        got = spans.observe(expected_surface_pixel(background), text, text_x, text_y)
+        assert np.array_equal(got, expected), trial
+
+
+def expected_surface_pixel(color) -> int:
+    return (color[0] << 16) | (color[1] << 8) | color[2]
+
+
+def test_span_observation_shrinks_as_smoothscale_any_picture():
+    """The box filter alone, on pictures of random runs (one to 40 pixels long, saturated colours
+    included), against ``pygame.transform.smoothscale``."""
+    rng = np.random.default_rng(31)
+    width, height = 1000, 800
+    spans = SpanObservation(width, height, 96, 96, capacity=width)
+    for trial in range(3):
+        palette = rng.integers(0, 1 << 24, size=12)
+        palette[:3] = (0xFFFFFF, 0, 0xFF00FF)
+        target = spans.target()
+        picture = np.empty((height, width), dtype=np.uint32)
+        for y in range(height):
+            x = 0
+            while x < width:
+                length = int(rng.integers(1, 41))
+                color = int(palette[rng.integers(0, 12)])
+                picture[y, x:x + length] = color
+                pygame_raster.draw_polygon(target, False, np.array([x, x + length - 1, x + length - 1, x]),
+                                           np.array([y, y, y, y]), color)
+                x += length
+        assert not spans.overflowed()
+        surface = pygame.Surface((width, height))
+        pygame.surfarray.blit_array(surface, picture.T)
+        expected = pygame.surfarray.array3d(pygame.transform.smoothscale(surface, (96, 96))).transpose(1, 0, 2)
+        assert np.array_equal(spans.observe(0, np.zeros((0, 0), dtype=np.uint32), 0, 0), expected), trial
 
 
 def test_box2d_transform_is_box2ds_bit_for_bit():

@@ -7,7 +7,8 @@ several bodies.
 - the damaged foot really is shorter once loaded: pyBullet ``getAABB`` (``getCollisionShapeData``
   segfaults on these MJCF links, environment-notes §4) and the MuJoCo model's capsule size;
 - a problem over several environments evaluates each exactly as a problem over that one alone, so
-  the fitness of the paper's protocol is the mean of the single-body fitnesses.
+  the fitness of the paper's protocol is the mean of the single-body fitnesses (on two bodies that
+  score differently, so that each must have run).
 """
 
 from pathlib import Path
@@ -130,21 +131,24 @@ def test_fitness_over_two_bodies_is_the_mean_of_each_alone():
     assert together[0] != together[1]  # the damaged body really behaves differently
 
 
-def test_training_fitness_over_two_envs_is_the_mean(tmp_path):
-    """Through the real training front-end: same seed, one generation, each env alone and both."""
+def test_training_fitness_over_two_bodies_is_the_mean_of_each(tmp_path):
+    """Through the real training front end: same seed, one generation, each body alone and both. The two
+    bodies give different fitness, so a run that evaluated only one of them, or one twice, would fail."""
     import train_static
 
     def first_row(environment: str) -> dict:
         folder = tmp_path / environment.replace(",", "+")
         argv = ["--environment", environment, "--generations", "1", "--popsize", "4", "--seed", "5",
-                "--threads", "1", "--folder", str(folder)]
+                "--max_episode_steps", "40", "--threads", "1", "--folder", str(folder)]
         assert train_static.main(argv) == 0
         (run_dir,) = Path(folder).iterdir()
         return read_metrics(run_dir / "metrics.csv")[0]
 
-    both, first, second = (first_row(text) for text in ("CartPole-v0,CartPole-v1", "CartPole-v0", "CartPole-v1"))
+    both, first, second = (first_row(text) for text in ("Ant-v5,AntAsymLeft-v5", "Ant-v5", "AntAsymLeft-v5"))
     for column in ("fitness_mean", "center_return"):
+        assert float(first[column]) != float(second[column])  # so that the mean tells them apart
         assert float(both[column]) == pytest.approx((float(first[column]) + float(second[column])) / 2)
+    assert int(both["env_steps"]) == int(first["env_steps"]) + int(second["env_steps"])  # every episode of each
 
 
 def test_envs_of_different_sizes_are_one_line_and_exit_2(tmp_path, capsys):

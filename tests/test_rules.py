@@ -1,7 +1,7 @@
 """The nine Hebbian rules (policies/rules.py) against the equations of upstream spec §4.1.
 
-Each rule's vectorised ``delta`` and its folded form (a o_j + b) o_i + c o_j + d are compared with a
-plain per-synapse loop that reads coefficient row ``offset + i * n_out + j`` (i pre-synaptic,
+Each rule's folded form (a o_j + b) o_i + c o_j + d, the factors the compiled Hebbian kernel reads
+(``Rule.fold``), is compared with a plain per-synapse loop that reads coefficient row ``offset + i * n_out + j`` (i pre-synaptic,
 j post-synaptic) with the column meanings of the original kernels: 0 = A, 1 = B, 2 = C, 3 = eta
 (D in plain ABCD), 4 = D inside eta (D outside for _D_out), 5 = D outside eta.
 """
@@ -27,7 +27,7 @@ def reference_delta(name, rows, offset, pre, post):
 
 
 def layer_coefficients(rows, offset, n_out, n_in):
-    """The layer's rows rearranged to (n_out, n_in, k), the weight orientation ``delta`` takes."""
+    """The layer's rows rearranged to (n_out, n_in, k), the weight orientation ``fold`` is given."""
     block = rows[offset:offset + n_in * n_out]  # row-major over (i, j)
     return block.reshape(n_in, n_out, -1).transpose(1, 0, 2)
 
@@ -44,29 +44,15 @@ def test_number_of_coefficients(name):
 
 @pytest.mark.parametrize("name", list(EQUATIONS))
 @pytest.mark.parametrize("n_in, n_out", [(5, 3), (3, 7), (1, 1)])
-def test_delta_equals_the_per_synapse_loop(name, n_in, n_out):
+def test_folded_rule_equals_the_per_synapse_loop(name, n_in, n_out):
     rng = np.random.default_rng([sum(map(ord, name)), n_in, n_out])
     k = N_COEFFS[name]
     offset = 4  # the layer is not the first one: its rows start after another layer's
-    rows = rng.normal(size=(offset + n_in * n_out + 2, k))
+    rows = rng.normal(size=(offset + n_in * n_out + 2, k)).astype(np.float32)
     pre, post = rng.normal(size=n_in), rng.uniform(-1, 1, size=n_out)
-    expected = reference_delta(name, rows, offset, pre, post)
+    expected = reference_delta(name, rows.astype(np.float64), offset, pre, post)
 
-    delta = RULES[name].delta(layer_coefficients(rows, offset, n_out, n_in), pre, post)
-
-    assert delta.shape == (n_out, n_in)
-    np.testing.assert_allclose(delta, expected, rtol=1e-12, atol=1e-12)
-
-
-@pytest.mark.parametrize("name", list(EQUATIONS))
-def test_fold_gives_the_same_delta(name):
-    rng = np.random.default_rng(sum(map(ord, name)))
-    n_in, n_out, k = 5, 3, N_COEFFS[name]
-    rows = rng.normal(size=(n_in * n_out, k)).astype(np.float32)
-    pre, post = rng.normal(size=n_in), rng.uniform(-1, 1, size=n_out)
-    expected = reference_delta(name, rows.astype(np.float64), 0, pre, post)
-
-    a, b, c, d = RULES[name].fold(layer_coefficients(rows, 0, n_out, n_in))
+    a, b, c, d = RULES[name].fold(layer_coefficients(rows, offset, n_out, n_in))
     assert a.shape == (n_out, n_in) and a.dtype == np.float32
     o_i, o_j = pre[None, :], post[:, None]
     folded = (a * o_j + b) * o_i + c * o_j + d

@@ -386,7 +386,9 @@ def test_a_wrong_experiment_file_is_one_line_and_exit_2(tmp_path, text, message)
 def test_the_papers_experiment_files_hold_the_papers_settings():
     from cli.config import TrainConfig
 
-    for path in sorted((ROOT / "experiments" / "paper").glob("*.toml")):
+    paths = sorted((ROOT / "experiments" / "paper").glob("*.toml"))
+    assert paths, "experiments/paper holds no experiment files"  # a glob that matches nothing would check nothing
+    for path in paths:
         config = TrainConfig.from_toml(path)
         assert (config.es.popsize, config.es.lr, config.es.decay, config.es.sigma) == (200, 0.2, 0.995, 0.1), path
         assert config.run.generations == 300 and config.run.threads == -1, path

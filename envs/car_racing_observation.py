@@ -1,0 +1,332 @@
+"""CarRacing's 96 x 96 observation from spans, without the 1000 x 800 picture (issue 21).
+
+Gymnasium's ``CarRacing`` draws a 1000 x 800 picture at every step and shrinks it with
+``pygame.transform.smoothscale``; the observation is the shrunk picture. Here the drawing
+(``envs.pygame_raster``, pygame's own polygon algorithms) records what it would write as spans,
+row by row, and the shrinking is computed row by row from those spans:
+
+- pygame-ce 2.5's ``smoothscale`` (``src_c/transform.c``: ``scalesmooth``) shrinks along x, then
+  along y, with the fixed-point box filter of its SSE2 backend (``src_c/simd_transform_sse2.c``:
+  ``filter_shrink_X_SSE2``, ``filter_shrink_Y_SSE2``; ARM's NEON backend runs the same code through
+  sse2neon). An output pixel is the 16-bit sum of the source pixels wholly inside it, plus the two
+  pixels it shares with its neighbours, each weighted ``(4 v * w) >> 16``, times a reciprocal,
+  ``>> 16``, saturated (``_mm_mulhi_epu16``, ``_mm_packus_epi16``). ``shrink_schedule`` walks the
+  C loop once to find which pixels are shared and with which weights;
+- a row is painted in a 1000-pixel buffer (spans in drawing order, blends as pygame blends them);
+  an output pixel none of whose source pixels holds a span's end is of one colour, and is copied
+  from a palette of rows of one colour, computed once per colour; the others are summed, three
+  channels at once in 16-bit lanes of one integer (no lane carries: eleven pixels of 255 at most);
+- a row whose spans are the previous row's is that row; an anti-aliased edge's pixels that the
+  polygon's own fill covers right after are never recorded.
+
+The result is ``np.array_equal`` to smoothscale of pygame's picture (``tests/test_car_racing.py``:
+random polygons, random pictures, and the environment side by side with Gymnasium's).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from envs.pygame_raster import SPAN_BITS, blend, draw_polygon, gfx_aapolygon, gfx_filled_polygon
+
+_FLAGS = {"cache": True, "nogil": True}
+_ONE = 0x4000  # the SSE2 filter's unit: a source pixel is 0x4000
+_LANE = 0xFFFF
+_PALETTE = 64  # colours whose uniform output rows are kept (a frame has about a dozen)
+
+
+def shrink_schedule(source: int, target: int) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
+    """The SSE2 filter's walk along one axis, as its C loop makes it.
+
+    Returns the reciprocal, and per output pixel the source pixel it shares with the next one
+    (its last), that pixel's weight in it (``xcounter``) and the remainder carried into the next
+    (``xfrac``). Source pixels between two shared ones are summed whole.
+    """
+    space = _ONE * source // target  # "must be > 1": a shrink
+    reciprocal = (0x40000000 // space) & _LANE  # _mm_set1_epi16 keeps 16 bits
+    counter, shared, weights, carried = space, [], [], []
+    for position in range(source):
+        if counter > _ONE:
+            counter -= _ONE
+        else:
+            fraction = _ONE - counter
+            shared.append(position)
+            weights.append(counter)
+            carried.append(fraction)
+            counter = space - fraction
+    if len(shared) != target:
+        raise ValueError(f"smoothscale's walk from {source} to {target} writes {len(shared)} pixels")
+    return tuple([reciprocal] + [np.array(values, dtype=np.int64) for values in (shared, weights, carried)])
+
+
+@njit(**_FLAGS)
+def _spread(pixel):
+    """XRGB8888 -> blue, green, red in 16-bit lanes 0, 1, 2 of one integer."""
+    pixel = np.int64(pixel)
+    return (pixel & 0xFF) | ((pixel & 0xFF00) << 8) | ((pixel & 0xFF0000) << 16)
+
+
+@njit(**_FLAGS)
+def _lane(spread, lane):
+    return (spread >> (16 * lane)) & _LANE
+
+
+@njit(**_FLAGS)
+def _output(accumulated, value, weight, reciprocal):
+    """One channel of a written pixel: ``mulhi(4 v, w) + acc``, ``mulhi(., recip)``, packus."""
+    total = (((4 * value * weight) >> 16) + accumulated) & _LANE
+    return min((total * reciprocal) >> 16, 255)
+
+
+@njit(**_FLAGS)
+def _pixel_of(spread, previous, column, sums, x_schedule):
+    """One output pixel of ``filter_shrink_X_SSE2`` (spread lanes): ``sums`` of its whole source
+    pixels, the carry from ``previous`` (the pixel shared with the output pixel before), and the
+    part of ``spread`` (the pixel it shares with the next)."""
+    reciprocal, _, weights, carried, _ = x_schedule
+    result = 0
+    for lane in range(3):
+        carry = ((4 * _lane(previous, lane) * carried[column - 1]) >> 16) if column > 0 else 0
+        accumulated = (_lane(sums, lane) + carry) & _LANE
+        result |= _output(accumulated, _lane(spread, lane), weights[column], reciprocal) << (16 * lane)
+    return result
+
+
+@njit(**_FLAGS)
+def _uniform_row(color, x_schedule, out):
+    """Every output pixel of a row of one colour (spread)."""
+    shared = x_schedule[1]
+    spread = _spread(color)
+    for column in range(shared.shape[0]):
+        whole = shared[column] - (shared[column - 1] + 1 if column > 0 else 0)
+        out[column] = _pixel_of(spread, spread, column, spread * whole, x_schedule)
+
+
+@njit(**_FLAGS)
+def _palette_row(color, palette, rows, x_schedule):
+    """Which of ``rows`` holds the output pixels of a row of uniform ``color`` (computed when new);
+    -1 when the palette is full. ``palette``: its size, then (colour, row) pairs in a table hashed
+    by colour, colour -1 for a free slot."""
+    slots = (palette.shape[0] - 1) // 2
+    slot = (np.int64(color) * 40503) % slots
+    for _ in range(slots):
+        key = palette[1 + 2 * slot]
+        if key == color:
+            return palette[2 + 2 * slot]
+        if key < 0:
+            used = palette[0]
+            if used >= rows.shape[0]:
+                return -1
+            palette[0] = used + 1
+            palette[1 + 2 * slot], palette[2 + 2 * slot] = color, used
+            _uniform_row(color, x_schedule, rows[used])
+            return used
+        slot = (slot + 1) % slots
+    return -1
+
+
+@njit(**_FLAGS)
+def _shrink_row(row, mixed, x_schedule, palette, rows, out):
+    """``filter_shrink_X_SSE2`` of one resolved row into ``out`` (spread pixels); ``mixed`` flags
+    (cleared on the way) the output pixels whose source pixels may differ.
+
+    An output pixel whose source pixels (shared ones included) are of one colour depends on that
+    colour alone: it is copied from the palette's row for that colour. The others are summed.
+    """
+    shared = x_schedule[1]
+    last_color, entry = np.int64(-1), -1
+    for column in range(shared.shape[0]):
+        first = shared[column - 1] + 1 if column > 0 else 0
+        color = np.int64(row[shared[column]])
+        if not mixed[column]:
+            if color != last_color:
+                last_color, entry = color, _palette_row(color, palette, rows, x_schedule)
+            if entry >= 0:
+                out[column] = rows[entry, column]
+                continue
+        mixed[column] = False
+        sums = 0
+        for x in range(first, shared[column]):
+            sums += _spread(row[x])
+        previous = _spread(row[first - 1]) if column > 0 else 0
+        out[column] = _pixel_of(_spread(color), previous, column, sums, x_schedule)
+
+
+@njit(**_FLAGS)
+def _unpack(record):
+    """(x1, x2, colour, alpha) of ``pygame_raster.span_record``."""
+    mask = (1 << SPAN_BITS) - 1
+    return record & mask, (record >> SPAN_BITS) & mask, (record >> 28) & 0xFFFFFF, (record >> 20) & 0xFF
+
+
+@njit(**_FLAGS)
+def _same_spans(records, counts, y):
+    """Are row ``y``'s span records those of row ``y - 1``, in the same order?"""
+    if counts[y] != counts[y - 1]:
+        return False
+    for k in range(counts[y]):
+        if records[y, k] != records[y - 1, k]:
+            return False
+    return True
+
+
+@njit(**_FLAGS)
+def _resolve_row(y, row, mixed, column_of, records, counts, background, text, text_x, text_y):
+    """Paint row ``y``'s spans over the background, then the text; flag the output pixels in
+    which two neighbouring source pixels may differ (a span's ends)."""
+    width = row.shape[0]
+    row[:] = background
+    spans = records[y]
+    for k in range(counts[y]):
+        x1, x2, color, alpha = _unpack(spans[k])
+        if alpha == 255:
+            row[x1:x2 + 1] = color
+        else:
+            row[x1] = blend(row[x1], color, alpha)
+        mixed[column_of[x1]] = True  # pixels x1 - 1 and x1 are in the output pixel of x1
+        if x2 + 1 < width:
+            mixed[column_of[x2 + 1]] = True
+    line = y - text_y
+    if 0 <= line < text.shape[0]:
+        for x in range(max(text_x, 0), min(text_x + text.shape[1], width)):
+            row[x] = text[line, x - text_x]
+            mixed[column_of[x]] = True
+        if text_x + text.shape[1] < width:
+            mixed[column_of[max(text_x + text.shape[1], 0)]] = True
+
+
+@njit(**_FLAGS)
+def observe(records, counts, background, text, text_x, text_y, x_schedule, y_schedule, work, out):
+    """The (rows, columns, RGB) observation of a height x width picture given as span records.
+
+    ``work``: (row buffer uint32 (width), mixed flags bool (columns), x-shrunk row int64
+    (columns), palette int64 (see ``_palette_row``), its rows int64 (entries, columns)).
+    """
+    row, mixed, shrunk, palette, rows = work
+    height, column_of = records.shape[0], x_schedule[4]
+    reciprocal, shared, weights, carried, _ = y_schedule
+    sums = np.zeros(shrunk.shape[0], dtype=np.int64)
+    output_row = 0
+    for y in range(height):
+        # a row drawn as the previous one was is the same row: its shrunk pixels are there already
+        text_row = text.shape[0] > 0 and text_y <= y <= text_y + text.shape[0]  # (or the row after it)
+        if y == 0 or text_row or not _same_spans(records, counts, y):
+            _resolve_row(y, row, mixed, column_of, records, counts, background, text, text_x, text_y)
+            _shrink_row(row, mixed, x_schedule, palette, rows, shrunk)
+        if output_row < shared.shape[0] and y == shared[output_row]:
+            _write_row(shrunk, sums, weights[output_row], carried[output_row], reciprocal, out[output_row])
+            output_row += 1
+        else:
+            sums += shrunk
+
+
+@njit(**_FLAGS)
+def _write_row(shrunk, sums, weight, carried, reciprocal, out):
+    """``filter_shrink_Y_SSE2`` at a shared row: the output row, and the sums restarted with the carry."""
+    for column in range(shrunk.shape[0]):
+        pixel, total = shrunk[column], sums[column]
+        remainder = 0
+        for lane in range(3):
+            value = _lane(pixel, lane)
+            out[column, 2 - lane] = _output(_lane(total, lane), value, weight, reciprocal)
+            remainder |= ((4 * value * carried) >> 16) << (16 * lane)
+        sums[column] = remainder
+
+
+def full_schedule(source: int, target: int) -> tuple:
+    """``shrink_schedule`` plus, per source pixel, the output pixel it is summed into (or shared by)."""
+    reciprocal, shared, weights, carried = shrink_schedule(source, target)
+    owner = np.searchsorted(shared, np.arange(source), side="left").astype(np.int64)
+    return reciprocal, shared, weights, carried, owner
+
+
+class SpanObservation:
+    """Buffers and schedules for one picture size and observation size, reused from step to step."""
+
+    def __init__(self, width: int, height: int, columns: int, rows: int, capacity: int = 48):
+        self.size = (width, height)
+        self.x_schedule = full_schedule(width, columns)
+        self.y_schedule = full_schedule(height, rows)
+        self.counts = np.zeros(height, dtype=np.int64)
+        if width > 1 << SPAN_BITS:
+            raise ValueError(f"span records hold x up to {(1 << SPAN_BITS) - 1}, the picture is {width} wide")
+        self.records = np.empty((height, capacity), dtype=np.int64)
+        self._work = (np.empty(width, dtype=np.uint32), np.zeros(columns, dtype=np.bool_),
+                      np.empty(columns, dtype=np.int64),
+                      np.full(1 + 4 * _PALETTE, -1, dtype=np.int64),  # a table twice the palette's size
+                      np.empty((_PALETTE, columns), dtype=np.int64))
+        self._work[3][0] = 0
+        self._before, self._between = np.empty(height, dtype=np.int64), np.empty(height, dtype=np.int64)
+
+    def target(self) -> tuple:
+        """An empty span list for ``envs.pygame_raster``'s drawing functions."""
+        self.counts[:] = 0
+        return (self.records, self.counts, self.size[1], self.size[0])
+
+    def record_polygons(self, target: tuple, flip: bool, *polygons) -> None:
+        """``pygame_raster.draw_polygons``'s arguments after the target and flip."""
+        record_polygons(target, flip, *polygons, self._before, self._between)
+
+    def overflowed(self) -> bool:
+        """True (and the list grown) if the last drawing recorded more spans in a row than it could keep."""
+        most = int(self.counts.max())
+        if most <= self.records.shape[1]:
+            return False
+        self.records = np.empty((self.size[1], 2 * most), dtype=np.int64)
+        return True
+
+    def observe(self, background: int, text: np.ndarray, text_x: int, text_y: int) -> np.ndarray:
+        out = np.empty((len(self.y_schedule[1]), len(self.x_schedule[1]), 3), dtype=np.uint8)
+        observe(self.records, self.counts, background, text, text_x, text_y, self.x_schedule, self.y_schedule,
+                self._work, out)
+        return out
+
+
+@njit(**_FLAGS)
+def record_polygons(spans, flip, xs, ys, starts, colors, antialiased, before, between):
+    """``pygame_raster.draw_polygons`` into a span list, less what cannot show.
+
+    An anti-aliased polygon's edge pixels that its own fill, drawn right after them, covers are
+    never seen: they are dropped (``before``, ``between``: int64 scratch of the picture's height).
+    """
+    records, counts, height = spans[0], spans[1], spans[2]
+    for k in range(colors.shape[0]):
+        polygon_xs, polygon_ys = xs[starts[k]:starts[k + 1]], ys[starts[k]:starts[k + 1]]
+        if not antialiased[k]:
+            draw_polygon(spans, flip, polygon_xs, polygon_ys, colors[k])
+            continue
+        low, high = max(polygon_ys.min() - 1, 0), min(polygon_ys.max() + 1, height - 1)
+        if low > high:
+            continue
+        if flip:  # the rows of the records
+            low, high = height - 1 - high, height - 1 - low
+        before[low:high + 1] = counts[low:high + 1]
+        gfx_aapolygon(spans, flip, polygon_xs, polygon_ys, colors[k])
+        between[low:high + 1] = counts[low:high + 1]
+        gfx_filled_polygon(spans, flip, polygon_xs, polygon_ys, colors[k])
+        for row in range(low, high + 1):
+            _drop_covered(records, counts, row, before[row], between[row])
+
+
+@njit(**_FLAGS)
+def _drop_covered(records, counts, row, first, fills):
+    """Remove row ``row``'s records first..fills - 1 (edge pixels) that lie inside one of the
+    records fills..counts[row] - 1 (the polygon's own fill, opaque, drawn after them)."""
+    end = min(counts[row], records.shape[1])
+    if fills >= end or first >= fills:
+        return
+    kept = first
+    for index in range(first, end):
+        x1, x2, _, _ = _unpack(records[row, index])
+        covered = False
+        if index < fills:
+            for fill in range(fills, end):
+                fill_x1, fill_x2, _, _ = _unpack(records[row, fill])
+                if fill_x1 <= x1 and x2 <= fill_x2:
+                    covered = True
+                    break
+        if not covered:
+            records[row, kept] = records[row, index]
+            kept += 1
+    counts[row] = kept + (counts[row] - end)  # (past the capacity: still counted)

@@ -1,0 +1,531 @@
+"""What the docs say is what runs (issue 18): every shell command of the code blocks of README.md,
+experiments/README.md and docs/*.md runs, for real, with its budget shrunk; the flag tables are what the
+parsers say.
+
+Each page runs in a temporary folder holding a view of the checkout (symbolic links to its files), so a
+command runs as from the repository root while everything it writes stays in the folder. The commands of
+a page run in order: ``<run>`` is the newest run folder a command above made in the folder named before
+it. ``<!-- not run: REASON -->`` above a block: its commands are parsed by their scripts' parsers, not
+run. ``<!-- files: NAME=PATH -->`` above a block: a file the block names is a copy of PATH. The
+conventions are described in docs/development.md.
+
+A script runs in a process forked from a server that has already imported torch and the project (what
+costs most of a command's start here), with the command's argv, folder and output: the script itself
+runs as ``python SCRIPT ...`` would run it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import atexit
+import contextlib
+import glob
+import importlib.util
+import io
+import json
+import os
+import re
+import runpy
+import select
+import shlex
+import shutil
+import signal
+import subprocess
+import sys
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+PAGES = [ROOT / "README.md", ROOT / "experiments" / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+SHELLS = ("bash", "sh", "shell", "console")
+DIRECTIVE = re.compile(r"<!-- (not run|files): (.*?) -->")  # a line of its own, just above a block
+PYTHONS = ("python", "python3")
+TIMEOUT = 300
+# what the scripts import, loaded once by the server that starts them (a module missing here is left out)
+PRELOAD = ("torch", "numba", "scipy", "gymnasium", "pygame", "Box2D", "mujoco", "pybullet", "matplotlib.figure",
+           "matplotlib.backends.backend_agg", "matplotlib.font_manager", "cli", "envs", "es", "policies", "report")
+
+spec = importlib.util.spec_from_file_location("docs_generate", ROOT / "docs" / "generate.py")
+generate = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(generate)
+
+# extra -> (modules it installs, how to tell a command needs it)
+EXTRAS = {
+    "reservoirs": (("reservoirpy", "stable_baselines3", "optuna", "cmaes"),
+                   lambda script, args: script.startswith("scripts/") or "--reservoir" in args),
+    "ray": (("ray",), lambda script, args: "ray" in args or "ray_vs_process" in script),
+    "atari": (("ale_py",), lambda script, args: any(re.search(r"ALE/|NoFrameskip|Deterministic-v|pong", word)
+                                                     for word in args)),
+    "tensorboard": (("tensorboard",), lambda script, args: "--tensorboard" in args or script.startswith("scripts/test")),
+}
+# budgets: flag -> tiny value
+SHRINK = {"--generations": "1", "--popsize": "2", "--episodes": "1", "--eval_episodes": "1", "--eval_every": "1",
+          "--training_steps": "64", "--training_timesteps": "64", "--HP_training_steps": "64", "--nb_trials": "1",
+          "--nb_seeds": "1", "--seeds": "1", "--rounds": "1", "--steps": "20"}
+TRAIN_SCRIPTS = ("train_static.py", "train_hebb.py")
+EXPERIMENT_SCRIPTS = ("experiments/paper.py", "experiments/reservoir_front/compare.py")
+# documented commands that fail for a known reason being fixed elsewhere
+# what a page's folder must not link to: the outputs commands write
+OUTPUTS = {".git", ".venv", "runs", "weights", "heb_coeffs", "logs", "models", "__pycache__", ".pytest_cache"}
+
+
+# --- the commands of the pages ---------------------------------------------------------------------
+
+
+@dataclass
+class Command:
+    page: Path
+    line: int
+    words: list[str]
+    not_run: str | None = None
+    files: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        return f"{self.page.relative_to(ROOT)}:{self.line}"
+
+
+def block_commands(page: Path, start: int, lines: list[str], directives: dict) -> list[Command]:
+    """The commands of one code block: continuation lines joined, comments dropped."""
+    commands, pending, first = [], "", None
+    for number, line in enumerate(lines, start):
+        if not pending and (not line.strip() or line.lstrip().startswith("#")):
+            continue
+        first = first or number
+        pending += line.rstrip()
+        if pending.endswith("\\"):
+            pending = pending[:-1] + " "
+            continue
+        words = shlex.split(pending, comments=True)
+        files = dict(item.split("=", 1) for item in directives.get("files", "").split())
+        commands.append(Command(page, first, words, directives.get("not run"), files))
+        pending, first = "", None
+    return commands
+
+
+def page_commands(page: Path) -> list[Command]:
+    commands, directives, block, start, language = [], {}, None, 0, ""
+    for number, line in enumerate(page.read_text().splitlines(), 1):
+        if block is not None:
+            if line.startswith("```"):
+                commands += block_commands(page, start, block, directives) if language in SHELLS else []
+                block, directives = None, {}
+            else:
+                block.append(line)
+        elif line.startswith("```"):
+            block, start, language = [], number + 1, line[3:].strip()
+        elif match := DIRECTIVE.fullmatch(line.strip()):
+            directives[match[1]] = match[2]
+        elif line.strip():
+            directives = {}
+    return commands
+
+
+COMMANDS = [command for page in PAGES for command in page_commands(page)]
+
+
+def parts(words: list[str]) -> list[list[str]]:
+    """``a && b``: the commands it chains."""
+    chained, current = [], []
+    for word in words:
+        if word == "&&":
+            chained.append(current)
+            current = []
+        else:
+            current.append(word)
+    return [*chained, current]
+
+
+def is_python(word: str) -> bool:
+    return Path(word).name in PYTHONS
+
+
+def needed_extra(script: str, args: list[str]) -> str | None:
+    for extra, (modules, needs) in EXTRAS.items():
+        if needs(script, args) and any(importlib.util.find_spec(module) is None for module in modules):
+            return extra
+    return None
+
+
+def skip_without_extra(script: str, args: list[str]) -> None:
+    extra = needed_extra(script, args)
+    if extra is not None:
+        pytest.skip(f"needs the {extra} extra: pip install -r requirements-{extra}.txt")
+
+
+# --- the scripts' parsers --------------------------------------------------------------------------
+
+
+class Captured(Exception):
+    def __init__(self, parser: argparse.ArgumentParser):
+        self.parser = parser
+
+
+def captured_parser(script: str) -> argparse.ArgumentParser:
+    """The parser of a script that builds it inside its main(): the script runs up to its parse_args."""
+    def capture(parser, args=None, namespace=None):
+        raise Captured(parser)
+
+    original, argv, path = argparse.ArgumentParser.parse_args, sys.argv, list(sys.path)
+    argparse.ArgumentParser.parse_args, sys.argv = capture, [script]
+    sys.path.insert(0, str((ROOT / script).parent))  # as python does: the script's folder first
+    try:
+        runpy.run_path(str(ROOT / script), run_name="__main__")
+    except Captured as captured:
+        return captured.parser
+    finally:
+        argparse.ArgumentParser.parse_args, sys.argv, sys.path[:] = original, argv, path
+    raise AssertionError(f"{script} built no argparse parser")
+
+
+def parser_of(script: str) -> argparse.ArgumentParser:
+    if "/" not in script or script.startswith("scripts/"):
+        return generate.parser_of(script)
+    return captured_parser(script)
+
+
+def check_parses(script: str, args: list[str]) -> None:
+    """``script args`` parse with the script's own parser (compare.py: its training flags after ``--``
+    with the training scripts')."""
+    if not (ROOT / script).is_file():
+        pytest.fail(f"{script}: no such script in the repository")
+    if script.startswith("scripts/"):
+        skip_without_extra(script, args)  # their parsers import the extra
+    checks = [(script, args)]
+    if "--" in args and script.endswith("compare.py"):
+        checks = [(script, args[:args.index("--")]), *((train, args[args.index("--") + 1:]) for train in TRAIN_SCRIPTS)]
+    for name, words in checks:
+        errors = io.StringIO()
+        with contextlib.redirect_stderr(errors), contextlib.redirect_stdout(io.StringIO()):
+            try:
+                parser_of(name).parse_args(words)
+            except SystemExit as exit:
+                if exit.code:
+                    pytest.fail(f"{shlex.join([name, *words])}: {errors.getvalue().strip()}")
+
+
+def check_statically(words: list[str]) -> None:
+    """A command that does not run here: each of its parts is what it looks like."""
+    for part in parts(words):
+        program = Path(part[0]).name
+        if program == "xvfb-run":
+            check_statically(part[part.index("--") + 1:])
+        elif program == "pip" or part[1:3] == ["-m", "pip"]:
+            for index, word in enumerate(part):
+                if word == "-r":
+                    assert (ROOT / part[index + 1]).is_file(), f"{shlex.join(part)}: no {part[index + 1]}"
+        elif is_python(program) and part[1] == "-m":
+            assert part[2] in ("venv", "pytest"), f"{shlex.join(part)}: which module?"
+            assert all((ROOT / word).exists() for word in part[3:] if not word.startswith("-") and part[2] == "pytest")
+        elif is_python(program):
+            check_parses(part[1], placeholders_as_values(part[2:]))
+        elif program == "ray":
+            assert part[1] in ("start", "stop", "status"), shlex.join(part)
+        elif program != "git":
+            pytest.fail(f"{shlex.join(part)}: the suite cannot check this command; say how in tests/test_docs.py")
+
+
+def placeholders_as_values(args: list[str]) -> list[str]:
+    return [re.sub(r"<[a-z ]+>", "x", word) for word in args]
+
+
+# --- running a command -----------------------------------------------------------------------------
+
+
+def run_script(argv: list[str], cwd: str, log: str) -> None:
+    """In a forked process: run ``python argv...`` in ``cwd``, its output to ``log``, and exit as it does."""
+    code = 1
+    try:
+        output = os.open(log, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        os.dup2(output, 1)
+        os.dup2(output, 2)
+        os.dup2(os.open(os.devnull, os.O_RDONLY), 0)
+        sys.stdout = io.TextIOWrapper(io.FileIO(1, "wb", closefd=False), line_buffering=True)
+        sys.stderr = io.TextIOWrapper(io.FileIO(2, "wb", closefd=False), line_buffering=True)
+        os.chdir(cwd)
+        sys.argv = list(argv)
+        sys.path.insert(0, str(Path(argv[0]).parent))
+        runpy.run_path(argv[0], run_name="__main__")
+        code = 0
+    except SystemExit as exit:
+        code = exit.code if isinstance(exit.code, int) else (0 if exit.code is None else 1)
+        if not isinstance(exit.code, int | None):
+            print(exit.code, file=sys.stderr)
+    except BaseException:  # noqa: BLE001 -- whatever the script raised ends its run, as it would in python
+        traceback.print_exc()
+    finally:
+        atexit._run_exitfuncs()  # what the interpreter does at exit (Ray's shutdown, pools)
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+
+
+def serve() -> None:
+    """The launcher's server (``python tests/test_docs.py``): import what the scripts import, then for each
+    request line ``[argv, cwd, log]`` fork a process that runs it; answer its pid, then its exit code."""
+    sys.path.insert(0, str(ROOT))
+    for module in PRELOAD:
+        with contextlib.suppress(ImportError):
+            importlib.import_module(module)
+    while line := sys.stdin.readline():
+        argv, cwd, log = json.loads(line)
+        pid = os.fork()
+        if pid == 0:
+            os.setpgid(0, 0)  # its own process group, which a timeout ends whole
+            run_script(argv, cwd, log)
+        print(pid, flush=True)
+        print(os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]), flush=True)
+
+
+def read_line(stream, timeout: float) -> str | None:
+    """A line from the server, unbuffered (so that select sees what is left), or None after ``timeout``."""
+    data, deadline = b"", time.monotonic() + timeout
+    while not data.endswith(b"\n"):
+        if not select.select([stream], [], [], max(0.0, deadline - time.monotonic()))[0]:
+            return None
+        chunk = os.read(stream.fileno(), 1)
+        assert chunk, "the launcher's server stopped"
+        data += chunk
+    return data.decode()
+
+
+@pytest.fixture(scope="session")
+def launcher():
+    """Start commands from a server that has already imported what every script imports (a cold start
+    costs 5 to 10 s here, mostly torch and matplotlib)."""
+    server = subprocess.Popen([sys.executable, __file__], stdin=subprocess.PIPE, stdout=subprocess.PIPE, bufsize=0)
+
+    def launch(argv: list[str], cwd: Path, log: Path) -> int:
+        server.stdin.write((json.dumps([argv, str(cwd), str(log)]) + "\n").encode())
+        pid = int(read_line(server.stdout, TIMEOUT))
+        code = read_line(server.stdout, TIMEOUT)
+        if code is None:
+            os.killpg(pid, signal.SIGKILL)
+            read_line(server.stdout, TIMEOUT)
+            pytest.fail(f"{shlex.join(argv)} ran longer than {TIMEOUT} s; output:\n{log.read_text()[-3000:]}")
+        return int(code)
+
+    yield launch
+    server.stdin.close()
+    server.wait(timeout=60)
+
+
+@dataclass
+class PageFolder:
+    """A page's temporary folder: a view of the checkout, and the runs its commands made, in order."""
+    path: Path
+    runs: list[Path] = field(default_factory=list)
+    done: set[int] = field(default_factory=set)
+    skipped: dict[int, str] = field(default_factory=dict)
+
+    def run_folders(self) -> set[Path]:
+        found = set()
+        for folder, subfolders, files in os.walk(self.path):  # links into the checkout are not followed
+            if "config.json" in files and "checkpoint.npz" in files:
+                found.add(Path(folder))
+        return found
+
+    def newest_run(self, prefix: str) -> Path | None:
+        parent = (self.path / prefix).resolve() if prefix else None
+        matching = [run for run in self.runs if parent is None or run.parent.resolve() == parent]
+        return matching[-1] if matching else None
+
+
+def page_folder(root: Path) -> PageFolder:
+    root.mkdir(parents=True)
+    for entry in ROOT.iterdir():
+        if entry.name not in OUTPUTS:
+            (root / entry.name).symlink_to(entry)
+    return PageFolder(root)
+
+
+@pytest.fixture(scope="session")
+def folders(tmp_path_factory):
+    made: dict[Path, PageFolder] = {}
+
+    def folder(page: Path) -> PageFolder:
+        if page not in made:
+            made[page] = page_folder(tmp_path_factory.mktemp("docs") / page.stem)
+        return made[page]
+    return folder
+
+
+def fill(word: str, folder: PageFolder, command: Command) -> str:
+    """``<run>`` -> the newest run in the folder named before it; /tmp/... -> inside the page's folder."""
+    if "<run>" in word:
+        prefix = word[:word.index("<run>")].split("=")[-1].rstrip("/")  # --flag=runs/<run> too
+        prefix = prefix[1:] if prefix.startswith("/tmp/") else prefix
+        run = folder.newest_run(prefix)
+        if run is None:
+            skipped = [f"line {line}: {why}" for line, why in folder.skipped.items()]
+            if skipped:
+                pytest.skip(f"no run in {prefix or '.'} to fill <run>: an earlier command was skipped ({skipped[0]})")
+            pytest.fail(f"{command.name}: no run made in {prefix or '.'} by a command above fills <run>")
+        word = word.replace("<run>", run.name, 1)
+    if re.search(r"<[a-z ]+>", word):
+        pytest.fail(f"{command.name}: unknown placeholder in {word!r} (only <run> is filled)")
+    if word.startswith("/tmp/"):
+        word = str(folder.path / word[1:])
+    return word
+
+
+def shrink(script: str, args: list[str], folder: PageFolder) -> list[str]:
+    """The command with tiny budgets, run serially and with short episodes, writing inside ``folder``."""
+    extra = args[args.index("--"):] if "--" in args else []
+    args = args[:len(args) - len(extra)]
+    shrunk, index = [], 0
+    while index < len(args):
+        word = args[index]
+        if word in SHRINK:
+            value = "2" if word == "--generations" and "--resume" in args else SHRINK[word]
+            shrunk += [word, value]
+            index += 1
+            while index < len(args) and not args[index].startswith("--"):
+                index += 1  # the old value (several for --seeds)
+            continue
+        shrunk.append(word)
+        index += 1
+    serial = "2" if "ray" in args else "1"
+    if script in TRAIN_SCRIPTS or script in EXPERIMENT_SCRIPTS:
+        shrunk = set_flag(shrunk, "--threads", serial)
+    if script in TRAIN_SCRIPTS and "--resume" not in args:  # their defaults are the paper's: 200 x 300
+        shrunk += [word for flag in ("--generations", "--popsize") if flag not in args for word in (flag, SHRINK[flag])]
+        shrunk += [] if "--max_episode_steps" in args else ["--max_episode_steps", "50"]
+    if script in EXPERIMENT_SCRIPTS and "--folder" not in args:  # their default folder is in the checkout
+        shrunk += ["--folder", str(folder.path / "runs" / Path(script).stem)]
+    if script.endswith("compare.py") and "--arms" not in args:
+        shrunk += ["--arms", "static"]  # each arm is two processes
+    return shrunk + extra
+
+
+def set_flag(args: list[str], flag: str, value: str) -> list[str]:
+    if flag in args:
+        index = args.index(flag)
+        return [*args[:index + 1], value, *args[index + 2:]]
+    return [*args, flag, value]
+
+
+def expand(args: list[str], cwd: Path) -> list[str]:
+    """The shell's globbing, for ``weights/*CartPole*``."""
+    expanded = []
+    for word in args:
+        if "*" in word:
+            matches = sorted(glob.glob(word, root_dir=cwd))
+            assert matches, f"{word} matches nothing"
+            expanded += matches
+        else:
+            expanded.append(word)
+    return expanded
+
+
+def bring_files(command: Command, words: list[str], folder: PageFolder) -> None:
+    for name, source in command.files.items():
+        if name in words and not (folder.path / name).exists():
+            shutil.copyfile(folder.path / fill(source, folder, command), folder.path / name)
+
+
+def run(command: Command, folder: PageFolder, launch) -> None:
+    """Run ``command`` for real in the page's folder, after the commands above it."""
+    assert len(parts(command.words)) == 1 and is_python(command.words[0]), (
+        f"{command.name}: only python commands run here; mark the block <!-- not run: REASON -->")
+    script_word, *args = command.words[1:]
+    args = [fill(word, folder, command) for word in args]
+    check_parses(script_word, placeholders_as_values(args))
+    skip_without_extra(script_word, args)
+    args = expand(shrink(script_word, args, folder), folder.path)
+    bring_files(command, args, folder)
+    before = folder.run_folders()
+    log = folder.path / f"line{command.line}.log"
+    code = launch([str(folder.path / script_word), *args], folder.path, log)
+    folder.runs += sorted(folder.run_folders() - before, key=lambda path: path.stat().st_mtime)
+    assert code == 0, f"{command.name}: {shlex.join([script_word, *args])} exited {code}:\n{log.read_text()[-3000:]}"
+
+
+def run_in_order(command: Command, folders, launch) -> None:
+    """Run the page's runnable commands above ``command`` that have not run yet, then ``command``."""
+    folder = folders(command.page)
+    for earlier in [other for other in COMMANDS if other.page == command.page and other.line <= command.line]:
+        if earlier.not_run is not None or earlier.line in folder.done | set(folder.skipped):
+            continue
+        try:
+            run(earlier, folder, launch)
+            folder.done.add(earlier.line)
+        except pytest.skip.Exception as skip:
+            folder.skipped[earlier.line] = str(skip)
+            if earlier is command:
+                raise
+        except BaseException:
+            folder.done.add(earlier.line)  # it failed: its own test says so
+            if earlier is command:
+                raise
+
+
+# --- the tests -------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("command", COMMANDS, ids=[command.name for command in COMMANDS])
+def test_documented_command(command, folders, launcher):
+    if command.not_run is not None:
+        check_statically(command.words)
+        return
+    run_in_order(command, folders, launcher)
+
+
+def test_readme_begins_with_the_two_commands():
+    """The first command installs the base requirements and trains; the second installs them and
+    nothing else, then runs exactly the test command CI runs."""
+    train, tests = [parts(command.words) for command in COMMANDS[:2]]
+    assert train[1][1:] == ["install", "-r", "requirements.txt"] and tests[1][1:] == ["install", "-r", "requirements.txt"]
+    assert Path(train[2][1]).name == "train_static.py"
+    assert len(tests) == 3 and tests[2][1:] == ["-m", "pytest", "tests", "-q"]
+
+
+def test_flag_tables_match_the_parsers():
+    """Each table between flag markers is what docs/generate.py makes from the parsers now."""
+    pages = [page for page in generate.pages() if generate.MARKER.search(page.read_text())]
+    assert pages, "no flag table in docs/"
+    for page in pages:
+        for match in generate.MARKER.finditer(page.read_text()):
+            scripts = [match["script"], *([match["other"]] if match["other"] else [])]
+            if any(needed_extra(script, []) for script in scripts):
+                continue  # the reservoir scripts' parsers need their extra; CI has it
+            assert match["table"] == generate.table(match["script"], match["other"]), (
+                f"{page.relative_to(ROOT)}: the table of {match['script']} differs from its parser; "
+                "run python docs/generate.py")
+
+
+def table_commands() -> list[tuple[str, list[str]]]:
+    """The commands of the pages' tables (a measured figure's, an original command line's): inline code
+    that runs one of this repository's scripts."""
+    found = []
+    for page in PAGES:
+        for number, line in enumerate(page.read_text().splitlines(), 1):
+            for span in re.findall(r"`((?:\.venv/bin/)?python3? [^`]+)`", line) if line.startswith("|") else []:
+                words = shlex.split(span)
+                if (ROOT / words[1]).is_file() and not re.search(r"\$|\.\.\.", span):  # not templates of SLURM lines
+                    found.append((f"{page.relative_to(ROOT)}:{number}", words))
+    return found
+
+
+@pytest.mark.parametrize(("where", "words"), table_commands(), ids=[where for where, _ in table_commands()])
+def test_table_command_parses(where, words):
+    """A command in a table is not run (those are measurements, or the original's lines), but it parses."""
+    check_parses(words[1], placeholders_as_values(words[2:]))
+
+
+def test_no_command_outside_a_code_block():
+    """An indented block is a code block too, but the suite only reads fenced ones."""
+    for page in PAGES:
+        fenced = False
+        for number, line in enumerate(page.read_text().splitlines(), 1):
+            fenced ^= line.startswith("```")
+            assert fenced or not re.match(r" {4}(\.venv/bin/)?python3? \S+\.py", line), (
+                f"{page.relative_to(ROOT)}:{number}: a command in an indented block; fence it with ```bash")
+
+
+if __name__ == "__main__":
+    serve()
