@@ -25,7 +25,8 @@ def build_parser() -> Parser:
     parser = Parser(prog="plot_run.py", description=__doc__.splitlines()[0])
     parser.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="run folders made by train_*.py")
     parser.add_argument("-o", "--output", default=DEFAULT_OUTPUT, metavar="PATH",
-                        help=f"the picture to write, in the format its suffix names ({', '.join(plots.FIGURE_SUFFIXES)}; "
+                        help=f"the picture to write, in the format its suffix names "
+                             f"({', '.join(plots.FIGURE_SUFFIXES)}; "
                              f"default: {DEFAULT_OUTPUT}); never a file of a run folder")
     return parser
 
@@ -53,7 +54,8 @@ def labels(run_dirs: list[str]) -> list[str]:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        check_output("-o", args.output, plots.FIGURE_SUFFIXES, [Path(run_dir) / "metrics.csv" for run_dir in args.run_dirs])
+        inputs = [Path(run_dir) / "metrics.csv" for run_dir in args.run_dirs]
+        check_output("-o", args.output, plots.FIGURE_SUFFIXES, inputs)
         runs = [(label, read_run(run_dir)) for label, run_dir in zip(labels(args.run_dirs), args.run_dirs)]
         plots.save_comparison(Path(args.output), runs)
     except (UserError, ValueError) as error:  # ValueError: a value in metrics.csv that is not a number

@@ -61,7 +61,8 @@ def check_output(flag: str, path: str | Path, suffixes: tuple[str, ...], inputs:
     given = str(path)
     target = Path(path)
     if target.exists() and not target.is_file():
-        raise OutputRefused(f"{flag} {given}: exists and is not a regular file (a folder or a device); give a file name")
+        raise OutputRefused(f"{flag} {given}: exists and is not a regular file (a folder or a device); give a file "
+                            "name")
     resolved = target.resolve()
     if not resolved.parent.is_dir() or not os.access(resolved.parent, os.W_OK | os.X_OK):
         raise OutputRefused(f"{flag} {given}: {target.parent} is not an existing writable folder")
@@ -70,7 +71,8 @@ def check_output(flag: str, path: str | Path, suffixes: tuple[str, ...], inputs:
             raise OutputRefused(f"{flag} {given} is {other}, which this command reads (a weight file or one beside "
                                 "it); writing it would destroy the input: give another file name")
     run = run_folder_of(resolved)
-    if run is not None and (resolved.parent != run or any(fnmatch.fnmatch(resolved.name, pattern) for pattern in RUN_FILES)):
+    if run is not None and (resolved.parent != run
+                            or any(fnmatch.fnmatch(resolved.name, pattern) for pattern in RUN_FILES)):
         raise OutputRefused(f"{flag} {given} is {resolved.relative_to(run)} of the run folder {run}, a file the run "
                             "writes; give another file name")
     if fnmatch.fnmatch(resolved.name, JOURNAL):

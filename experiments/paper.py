@@ -48,10 +48,12 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("kind", choices=tuple(TRAIN_SCRIPTS))
     parser.add_argument("--seed", type=seed_value, default=None, help="seed of the training run (default: the file's)")
     parser.add_argument("--popsize", type=positive_int, default=None, help="default: the file's")
-    parser.add_argument("--generations", type=positive_int, default=None, help="total generations (default: the file's)")
+    parser.add_argument("--generations", type=positive_int, default=None,
+                        help="total generations (default: the file's)")
     parser.add_argument("--episodes", type=positive_int, default=None,
                         help="evaluation episodes per body (default: the file's)")
-    parser.add_argument("--threads", type=threads_value, default=None, help="workers; -1 = all cores (default: the file's)")
+    parser.add_argument("--threads", type=threads_value, default=None,
+                        help="workers; -1 = all cores (default: the file's)")
     parser.add_argument("--folder", type=non_empty, default=None, help="default: runs/<experiment>_<kind>_seed<seed>")
     parser.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
     return parser.parse_args(argv)

@@ -17,7 +17,8 @@ from report.plots import write_figure
 
 
 def plot_adaptation(trace: Trace, path: str | Path) -> None:
-    """A picture of the trace (PNG, PDF or SVG, as the suffix says); drawn with matplotlib's Agg canvas, so no display is ever needed."""
+    """A picture of the trace (PNG, PDF or SVG, as the suffix says); drawn with matplotlib's Agg canvas, so
+    no display is ever needed."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     from matplotlib.ticker import MaxNLocator

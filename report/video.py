@@ -1,7 +1,8 @@
 """Videos of evaluation episodes, written frame by frame as the environment renders them.
 
 The frames go to the file as they come (an H.264 mp4 through imageio's ffmpeg), so a long episode
-never accumulates in memory; they are written to a temporary file renamed over the target when it closes; odd frame sizes are padded to even ones, as the codec needs. While a
+never accumulates in memory; they go to a temporary file, renamed over the target when it closes;
+odd frame sizes are padded to even ones, as the codec needs. While a
 terminal watches, a progress line counts the frames written.
 """
 

@@ -203,13 +203,16 @@ CASES = {
     # flags and faults
     "threads far above the cores": Case(train(*RUN[:6], "--threads", "1000", "--folder", lambda r, w: str(w / "new")),
                                         "--threads 1000 would start 1000 worker processes"),
-    "render without a display": Case(evaluate("--render"), "no display", env={"DISPLAY": None, "SDL_VIDEODRIVER": "dummy"}),
+    "render without a display": Case(evaluate("--render"), "no display",
+                                     env={"DISPLAY": None, "SDL_VIDEODRIVER": "dummy"}),
     "MUJOCO_GL that Gymnasium cannot render": Case(
         lambda run, work: ["evaluate_static.py", "--environment", "Ant-v5", "--path_weights", str(run / "last.dat"),
-                           "--video", str(work / "ant.mp4")], "MUJOCO_GL=glx", env={"DISPLAY": None, "MUJOCO_GL": "glx"}),
+                           "--video", str(work / "ant.mp4")], "MUJOCO_GL=glx",
+        env={"DISPLAY": None, "MUJOCO_GL": "glx"}),
     # outputs aimed at a run's files, or at an input
     "--json the checkpoint": Case(evaluate("--json", in_run("checkpoint.npz")), "checkpoint.npz of the run folder"),
-    "--json the statistics": Case(evaluate("--json", in_run("last.obs_norm.npz")), "last.obs_norm.npz of the run folder"),
+    "--json the statistics": Case(evaluate("--json", in_run("last.obs_norm.npz")),
+                                  "last.obs_norm.npz of the run folder"),
     "--json config.json": Case(evaluate("--json", in_run("config.json")), "config.json of the run folder"),
     "--json a link to config.json": Case(evaluate("--json", lambda r, w: str(w / "out.json")),
                                          "config.json of the run folder", prepare=link_to_config),
@@ -228,14 +231,16 @@ CASES = {
     "plot_run.py -o x.jpg": Case(lambda run, work: ["plot_run.py", str(run), "-o", str(work / "x.jpg")],
                                  "give a name ending in .png"),
     # TOML
-    "TOML syntax error": Case(train("--config", lambda r, w: str(w / "bad.toml"), "--folder", lambda r, w: str(w / "new")),
-                              "bad.toml", prepare=lambda run, work: (work / "bad.toml").write_text("[es\npopsize = 4\n")),
+    "TOML syntax error": Case(
+        train("--config", lambda r, w: str(w / "bad.toml"), "--folder", lambda r, w: str(w / "new")), "bad.toml",
+        prepare=lambda run, work: (work / "bad.toml").write_text("[es\npopsize = 4\n")),
     "TOML value of the wrong type": Case(
         train("--config", lambda r, w: str(w / "bad.toml"), "--folder", lambda r, w: str(w / "new")), "popsize",
         prepare=lambda run, work: (work / "bad.toml").write_text('[es]\npopsize = "four"\n')),
     # hand-edited config.json
     "a standard-library recipe module": Case(resume, "standard library",
-                                             prepare=lambda run, work: edit_config(run, "env", "recipe_modules", ["this"])),
+                                             prepare=lambda run, work: edit_config(run, "env", "recipe_modules",
+                                                                                   ["this"])),
     "a module path in an environment id": Case(
         resume, "not a plain dotted module name",
         prepare=lambda run, work: edit_config(run, "env", "env_ids", ["../../evil:CartPole-v1"])),
@@ -246,7 +251,8 @@ CASES = {
     "obs_norm turned off in config.json": Case(resume, "does not normalise observations",
                                                prepare=lambda run, work: edit_config(run, "policy", "obs_norm", False)),
     # crafted checkpoints and run files
-    "NaN in theta": Case(resume, "theta holds NaN", prepare=lambda run, work: edit_checkpoint(run, theta=set_first(np.nan))),
+    "NaN in theta": Case(resume, "theta holds NaN",
+                         prepare=lambda run, work: edit_checkpoint(run, theta=set_first(np.nan))),
     "inf in theta": Case(resume, "theta holds NaN or infinite",
                          prepare=lambda run, work: edit_checkpoint(run, theta=set_first(np.inf))),
     "inf in the observation mean": Case(resume, "observations.sum holds NaN or infinite", prepare=lambda run, work:
@@ -265,16 +271,19 @@ CASES = {
     "a generation missing from metrics.csv": Case(resume, "metrics.csv holds generations",
                                                   prepare=lambda run, work: drop_metrics_row(run)),
     "a checkpoint that is not one": Case(resume, "not a readable checkpoint",
-                                         prepare=lambda run, work: (run / "checkpoint.npz").write_bytes(b"PK\x03\x04junk")),
+                                         prepare=lambda run, work: (run / "checkpoint.npz").write_bytes(
+                                             b"PK\x03\x04junk")),
     "NaN in the evaluated statistics": Case(evaluate(), "not an observation statistics file", prepare=lambda run, work:
                                             np.savez(run / "last.obs_norm.npz", mean=np.full(4, np.nan), std=np.ones(4),
                                                      clip=np.array(np.nan), observations=np.array(10))),
-    "a folder another process holds": Case(resume, "in use by another process", prepare=lambda run, work: hold_lock(run)),
+    "a folder another process holds": Case(resume, "in use by another process",
+                                           prepare=lambda run, work: hold_lock(run)),
     # the experiment scripts
     "paper.py --dry-run with a bad value": Case(lambda run, work: ["experiments/paper.py", "ant", "static", "--dry-run",
                                                                    "--popsize", "1"], "--popsize must be at least 2"),
     "paper.py on a folder with other settings": Case(
-        lambda run, work: ["experiments/paper.py", "ant", "static", "--dry-run", "--popsize", "8", "--folder", str(work)],
+        lambda run, work: ["experiments/paper.py", "ant", "static", "--dry-run", "--popsize", "8", "--folder",
+                           str(work)],
         "--popsize 8 (the run has 4)"),
     "compare.py with --evaluate_on of other sizes": Case(
         lambda run, work: ["experiments/reservoir_front/compare.py", "--environment", "CartPole-v1", "--evaluate_on",
@@ -290,7 +299,8 @@ CASES = {
         lambda run, work: ["scripts/test.py", *EVOLVE[:4], "--HP_training_steps", "2048", "--training_timesteps", "64"],
         "could run code", prepare=lambda run, work: crafted_journal(work), extra=True),
     "test.py over an earlier test": Case(
-        lambda run, work: ["scripts/test.py", *EVOLVE[:4], "--HP_training_steps", "2048", "--training_timesteps", "2048"],
+        lambda run, work: ["scripts/test.py", *EVOLVE[:4], "--HP_training_steps", "2048", "--training_timesteps",
+                           "2048"],
         "is from an earlier test", prepare=lambda run, work: earlier_test_summary(work), extra=True),
 }
 

@@ -81,7 +81,8 @@ def test_the_allowlist_rebuilds_the_optimiser_pickle_does(tmp_path):
     journal = genuine_journal(tmp_path, trials=9)
     storage = open_journal(journal)
     study_id = storage.get_all_studies()[0]._study_id
-    found = [text for trial in storage.get_all_trials(study_id) for text in optimizer_pickles(trial.system_attrs).values()]
+    found = [text for trial in storage.get_all_trials(study_id)
+             for text in optimizer_pickles(trial.system_attrs).values()]
     assert found and all(text is not None for text in found)
     for text in found:
         safe, plain = safe_loads(bytes.fromhex(text)).__getstate__(), pickle.loads(bytes.fromhex(text)).__getstate__()
@@ -128,8 +129,9 @@ def test_a_run_folder_has_one_holder(tmp_path):
 
 
 def test_a_refused_start_leaves_no_folder_behind(tmp_path):
+    threads = str(4 * (os.cpu_count() or 1) + 1)
     result = subprocess.run([sys.executable, str(ROOT / "train_static.py"), "--environment", "CartPole-v1", "--popsize",
-                             "4", "--threads", str(4 * (os.cpu_count() or 1) + 1), "--folder", str(tmp_path / "a" / "b")],
+                             "4", "--threads", threads, "--folder", str(tmp_path / "a" / "b")],
                             cwd=ROOT, env=BASE_ENV, check=False, capture_output=True, text=True, timeout=300)
     assert result.returncode == 2 and "worker processes" in result.stderr
     assert list(tmp_path.iterdir()) == []
@@ -219,7 +221,8 @@ def test_sigint_stops_a_process_started_with_sigint_ignored(run_folder):
 def test_a_closed_pipe_ends_training_quietly(tmp_path):
     command = (f"{sys.executable} train_static.py --environment CartPole-v1 --popsize 4 --generations 3 --threads 1 "
                f"--folder {tmp_path} 2>{tmp_path / 'err'} | head -1; echo ${{PIPESTATUS[0]}}")
-    result = subprocess.run(["bash", "-c", command], cwd=ROOT, env=BASE_ENV, check=False, capture_output=True, text=True, timeout=300)
+    result = subprocess.run(["bash", "-c", command], cwd=ROOT, env=BASE_ENV, check=False, capture_output=True,
+                            text=True, timeout=300)
     assert result.stdout.splitlines()[-1] == "0"
     assert (tmp_path / "err").read_text() == ""
 
