@@ -13,9 +13,10 @@ import sys
 from pathlib import Path
 
 from cli import Parser, UserError
+from cli.errors import say
 from es import files
+from es.outputs import check_output
 from report import plots
-
 
 DEFAULT_OUTPUT = "fitness_comparison.png"
 
@@ -24,7 +25,9 @@ def build_parser() -> Parser:
     parser = Parser(prog="plot_run.py", description=__doc__.splitlines()[0])
     parser.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="run folders made by train_*.py")
     parser.add_argument("-o", "--output", default=DEFAULT_OUTPUT, metavar="PATH",
-                        help=f"the PNG to write (default: {DEFAULT_OUTPUT})")
+                        help=f"the picture to write, in the format its suffix names "
+                             f"({', '.join(plots.FIGURE_SUFFIXES)}; "
+                             f"default: {DEFAULT_OUTPUT}); never a file of a run folder")
     return parser
 
 
@@ -51,6 +54,8 @@ def labels(run_dirs: list[str]) -> list[str]:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
+        inputs = [Path(run_dir) / "metrics.csv" for run_dir in args.run_dirs]
+        check_output("-o", args.output, plots.FIGURE_SUFFIXES, inputs)
         runs = [(label, read_run(run_dir)) for label, run_dir in zip(labels(args.run_dirs), args.run_dirs)]
         plots.save_comparison(Path(args.output), runs)
     except (UserError, ValueError) as error:  # ValueError: a value in metrics.csv that is not a number
@@ -59,7 +64,7 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as error:
         print(f"plot_run.py: error: cannot write {args.output}: {error.strerror or error}", file=sys.stderr)
         return 2
-    print(f"wrote {args.output} ({len(runs)} runs)")
+    say(f"wrote {args.output} ({len(runs)} runs)")
     return 0
 
 

@@ -32,6 +32,7 @@ from cli.train import resolve_environments
 from envs import ProblemSpec
 from envs.headless import RenderingUnavailable, check_can_render, check_display, choose_mujoco_gl
 from es.files import read_json
+from es.interrupts import honour_sigint
 from es.observations import SavedStatistics, load_statistics, statistics_path
 from es.runfolder import named_file
 from report.video import check_video_path
@@ -86,6 +87,12 @@ def path_flags(args: argparse.Namespace) -> dict[str, str]:
 def check_outputs(args: argparse.Namespace, inputs: list[str]) -> None:
     """Refuse, before any episode runs, outputs that could not be written or that would replace an
     input (the weight files) or each other."""
+    from es.outputs import JSON_SUFFIXES, check_outputs as check_paths  # the guard of every output
+    from report.plots import FIGURE_SUFFIXES
+    from report.video import VIDEO_SUFFIXES
+
+    check_paths([(flag, path, suffixes) for flag, path, suffixes in (("--json", args.json, JSON_SUFFIXES), (
+        "--plot", args.plot, FIGURE_SUFFIXES), ("--video", args.video, VIDEO_SUFFIXES)) if path is not None], inputs)
     outputs = [(flag, path) for flag, path in (("--json", args.json), ("--plot", args.plot), ("--video", args.video))
                if path is not None]
     for flag, path in outputs:
@@ -257,6 +264,7 @@ def evaluate_main(kind: str, parser: Parser, argv: list[str] | None = None) -> i
     from es.files import load_dat
     from report.video import record_first_episode
 
+    honour_sigint()  # a background job's SIGINT too
     argv = sys.argv[1:] if argv is None else argv
     args = parser.parse_args(argv)
     problem = recorder = None

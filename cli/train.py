@@ -21,8 +21,10 @@ from cli.errors import USER_ERRORS, Parser, UserError, explained, say
 from cli.flags import add_settings, defaults, given, non_empty
 from cli.hints import evaluate_hint, resume_hint
 from envs import ProblemSpec
+from envs.modules import resume_imports
+from es.interrupts import honour_sigint
 from es.loop import NonFiniteUpdate, Status, Trainer
-from es.runfolder import RunFolder, SaveError
+from es.runfolder import RunFolder, SaveError, release_locks
 from es.settings import ESSettings
 from report import tensorboard
 from report.log import FitnessPlot, GenerationLog
@@ -141,12 +143,17 @@ def config_for_resume(kind: str, args: argparse.Namespace) -> tuple[TrainConfig,
         flags["popsize"] += flags["popsize"] % 2  # as a new run would round it
     resumable = [item for item in declared() if item.spec.resumable]
     try:
-        return config.overlay(flags, {item.name for item in resumable}), folder
+        resumed = config.overlay(flags, {item.name for item in resumable})
     except Contradiction as error:
         raise UserError(f"--resume {args.resume}: {error}; a resumed run keeps its settings (only "
                         f"{', '.join(item.label for item in resumable)} may change): start a new run instead") from None
     except ValueError as error:  # a resumable value out of range
         raise UserError(str(error)) from None
+    folder.check_resumable(config.es, config.policy.obs_norm)  # the checkpoint against config.json, before any write
+    if imports := resume_imports(config.env.env_ids, config.env.recipe_modules, str(folder.path / "config.json")):
+        say(imports)  # only plain module names outside the standard library are imported
+    folder.lock()  # held until this process exits
+    return resumed, folder
 
 
 def check_tensorboard(config: TrainConfig) -> None:
@@ -213,13 +220,14 @@ def start(config: TrainConfig, folder: RunFolder | None) -> tuple[Trainer, objec
                                     config.env.label, log=log, display=display_for(sys.stdout), reporters=reporters)
     except BaseException:
         problem.close()
-        if created and folder is not None and not any(folder.path.iterdir()):
-            folder.path.rmdir()
+        if created and folder is not None:
+            folder.remove_if_unused()  # an empty folder but for its lock
         raise
     return trainer, problem
 
 
 def train_main(kind: str, parser: Parser, argv: list[str] | None = None) -> int:
+    honour_sigint()  # a background job's SIGINT too
     argv = sys.argv[1:] if argv is None else argv
     args = parser.parse_args(argv)
     trainer = None
@@ -260,6 +268,7 @@ def train_main(kind: str, parser: Parser, argv: list[str] | None = None) -> int:
     finally:
         if trainer is not None:
             trainer.close()
+        release_locks()  # the run folder's lock, for the next run in this process
 
 
 def report_end(trainer: Trainer, config: TrainConfig, status: Status) -> None:

@@ -22,6 +22,9 @@ INSTALL_HINT = ("install EGL or OSMesa (Debian/Ubuntu: apt-get install libegl1, 
                 "display and MUJOCO_GL=glfw (e.g. under xvfb-run)")
 
 
+MUJOCO_RENDERERS = ("glfw", "egl", "osmesa")  # the MUJOCO_GL values gymnasium's MujocoRenderer accepts
+
+
 class RenderingUnavailable(ValueError):
     """Frames were asked for but no GL backend can make them here."""
 
@@ -57,16 +60,15 @@ def is_mujoco(env: gym.Env) -> bool:
 
 
 NO_DISPLAY = ("--render shows a window, and there is no display (DISPLAY is not set); use --video PATH to record "
-              "the episode instead")
+              "the episode instead, or run under xvfb-run for a virtual display")
 
 
 def check_display(render_mode: str | None, environ=os.environ, platform: str = sys.platform) -> None:
-    """Refuse a window on a Linux machine without a display, before any environment is made (pyBullet's
-    GUI would wait for an X server forever); an SDL_VIDEODRIVER the user set (dummy, offscreen) is respected."""
-    from envs import USER_VIDEO_DRIVER
-
+    """Refuse a window on a Linux machine without a display, before any environment is made, whatever the
+    drivers say: MuJoCo's window aborts the process (SIGABRT) under SDL_VIDEODRIVER=dummy or a MUJOCO_GL
+    without a display, pyBullet's GUI waits for an X server forever, and pygame's dummy driver shows nothing."""
     if render_mode == "human" and platform.startswith("linux") and not (
-            environ.get("DISPLAY") or environ.get("WAYLAND_DISPLAY") or USER_VIDEO_DRIVER):
+            environ.get("DISPLAY") or environ.get("WAYLAND_DISPLAY")):
         raise RenderingUnavailable(NO_DISPLAY)
 
 
@@ -85,6 +87,9 @@ def check_can_render(envs: list[gym.Env], render_mode: str | None, environ=os.en
     if render_mode == "human" and not environ.get("DISPLAY"):
         raise RenderingUnavailable(NO_DISPLAY)
     backend = environ.get("MUJOCO_GL")
+    if backend and backend not in MUJOCO_RENDERERS:  # MuJoCo itself takes more (glx, cgl, wgl, disable)
+        raise RenderingUnavailable(f"MUJOCO_GL={backend}: Gymnasium renders MuJoCo only with "
+                                   f"{', '.join(MUJOCO_RENDERERS)}; unset MUJOCO_GL or give one of them")
     if render_mode == "rgb_array" and not environ.get("DISPLAY") and backend in (None, "", "glfw"):
         raise RenderingUnavailable(f"cannot render MuJoCo without a display: neither EGL nor OSMesa loads here; "
                                    f"{INSTALL_HINT}")

@@ -2,6 +2,10 @@
 
 A cluster scheduler sends SIGTERM before it kills a job, so it is handled like Ctrl-C: the run
 finishes its generation, saves, and stops with a resume command.
+
+A job a non-interactive shell starts in the background (``cmd &`` in a script) inherits SIGINT
+ignored, and Python then installs no handler of its own; ``honour_sigint`` gives such a process
+Python's usual one, so ``kill -INT`` stops it as Ctrl-C stops a foreground run.
 """
 
 from __future__ import annotations
@@ -34,3 +38,9 @@ class Interrupts:
         name = "interrupt" if signum == signal.SIGINT else signal.Signals(signum).name
         print(f"\n{name}: finishing this generation, then saving (Ctrl-C again to stop at once)",
               file=sys.stderr, flush=True)
+
+
+def honour_sigint() -> None:
+    """Raise KeyboardInterrupt on SIGINT even where the process was started with SIGINT ignored."""
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)

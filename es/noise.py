@@ -38,14 +38,18 @@ class NoiseTable:
 
     @classmethod
     def create(cls, seed: int, size: int, shared: bool = False) -> "NoiseTable":
-        memory = None
-        if shared:
-            memory = shared_memory.SharedMemory(create=True, size=size * 4)
-            array = np.ndarray((size,), dtype=np.float32, buffer=memory.buf)
-        else:
+        if not shared:
             array = np.empty(size, dtype=np.float32)
-        np.random.default_rng(seed).standard_normal(size, dtype=np.float32, out=array)
-        return cls(array, memory, owner=shared)
+            np.random.default_rng(seed).standard_normal(size, dtype=np.float32, out=array)
+            return cls(array)
+        table = cls(np.empty(0, np.float32), shared_memory.SharedMemory(create=True, size=size * 4), owner=True)
+        try:  # a failure or Ctrl-C while filling it must not leave the segment behind
+            table.array = np.ndarray((size,), dtype=np.float32, buffer=table._memory.buf)
+            np.random.default_rng(seed).standard_normal(size, dtype=np.float32, out=table.array)
+        except BaseException:
+            table.close()
+            raise
+        return table
 
     @classmethod
     def attach(cls, name: str, size: int) -> "NoiseTable":

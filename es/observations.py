@@ -117,6 +117,7 @@ def load_statistics(path: str | Path) -> SavedStatistics:
                                      clip if np.isfinite(clip) else None, int(saved["observations"]))
     except Exception as error:
         raise ValueError(f"cannot read observation statistics {path}: {type(error).__name__}: {error}") from None
-    if loaded.mean.shape != loaded.std.shape or loaded.mean.ndim != 1 or not (loaded.std > 0).all():
-        raise ValueError(f"{path} is not an observation statistics file (mean and std of one shape, std > 0)")
+    if (loaded.mean.shape != loaded.std.shape or loaded.mean.ndim != 1 or not (loaded.std > 0).all()
+            or not np.isfinite(loaded.mean).all() or not np.isfinite(loaded.std).all()):
+        raise ValueError(f"{path} is not an observation statistics file (finite mean and std of one shape, std > 0)")
     return loaded

@@ -8,12 +8,19 @@ Every write is atomic (``es.files``), and an OSError becomes a ``SaveError`` tha
 The checkpoint is the fields of one dataclass, ``Checkpoint``, written and read by iterating over
 them; a field holding a dict of arrays (the optimiser's, the strategy's, the observation statistics) is
 stored as one array per key, ``<field>.<key>``, and is empty in checkpoints written before it existed.
+
+A resume trusts nothing in the folder: ``check_resumable`` reads the checkpoint and metrics and refuses,
+before anything runs or is written, one whose generation, sizes or optimiser state do not match each
+other or the run's settings, or that holds NaN or infinity. A process that uses a folder holds an
+exclusive ``flock`` on its ``.lock`` file until it exits, so a second process cannot resume it meanwhile.
 """
 
 from __future__ import annotations
 
+import fcntl
 import io
 import math
+import os
 import shutil
 import time
 import typing
@@ -25,7 +32,11 @@ import numpy as np
 
 from es import files
 from es.observations import RunningStat, statistics_bytes, statistics_path
+from es.optimizers import make_optimizer
+from es.settings import ESSettings
 from es.strategy import ESState
+
+LOCK_FILE = ".lock"
 
 
 class SaveError(RuntimeError):
@@ -132,20 +143,27 @@ def fitness_file_name(run_id: str, env: str) -> str:
 class RunFolder:
     path: Path
     checkpoint_generation: int | None = field(default=None)  # the generation checkpoint.npz holds
+    made_parents: list[Path] = field(default_factory=list)  # the folders above it that creating it made
 
     @classmethod
     def create(cls, folder: str | Path, label: str, seed: int) -> "RunFolder":
         """A fresh run folder ``<folder>/<time>_<env>_seed<seed>``; never an existing one."""
         folder = Path(folder)
+        made = [parent for parent in (folder, *folder.parents) if not parent.exists()]
         folder.mkdir(parents=True, exist_ok=True)
         base = f"{time.strftime('%Y%m%d-%H%M%S')}_{label}_seed{seed}"
         for attempt in range(1000):
             path = folder / (base if attempt == 0 else f"{base}-{attempt + 1}")
             try:
                 path.mkdir()
-                return cls(path)
             except FileExistsError:
                 continue
+            run = cls(path, made_parents=made)
+            try:
+                run.lock()
+            except RunFolderError:  # a process that made the same name and locked it first
+                continue
+            return run
         raise RunFolderError(f"cannot create a new run folder in {folder}")
 
     @classmethod
@@ -158,6 +176,46 @@ class RunFolder:
     @property
     def name(self) -> str:
         return self.path.name
+
+    def lock(self) -> None:
+        """Hold ``.lock`` (flock, exclusive) until this process exits; refuse a folder another process holds."""
+        try:
+            descriptor = os.open(self.path / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as error:
+            raise RunFolderError(f"cannot lock {self.path}: {error.strerror or error}") from None
+        try:
+            fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(descriptor)
+            raise RunFolderError(f"{self.path} is in use by another process (it holds {self.path / LOCK_FILE}); "
+                                 "wait for it to end, or stop it first") from None
+        _HELD_LOCKS.append(descriptor)  # closed, so released, when the process exits
+
+    def remove_if_unused(self) -> None:
+        """Remove a folder this process created and that holds nothing but its lock (a start that failed),
+        and the folders above it that creating it made."""
+        if all(path.name == LOCK_FILE for path in self.path.iterdir()):
+            (self.path / LOCK_FILE).unlink(missing_ok=True)
+            self.path.rmdir()
+            for parent in self.made_parents:  # innermost first; one another process has used meanwhile stays
+                try:
+                    parent.rmdir()
+                except OSError:
+                    break
+
+    def check_resumable(self, es: ESSettings, obs_norm: bool) -> None:
+        """Refuse, reading only, a checkpoint that does not fit the settings of config.json or its own
+        parts, or a folder another process holds (see the module docstring)."""
+        if _locked_elsewhere(self.path / LOCK_FILE):
+            raise RunFolderError(f"{self.path} is in use by another process (it holds {self.path / LOCK_FILE}); "
+                                 "wait for it to end, or stop it first")
+        checkpoint = read_checkpoint(self.path / "checkpoint.npz")
+        check_checkpoint(checkpoint, es, obs_norm, self.path / "checkpoint.npz")
+        recorded = self.read_config().get("num_params")  # what the policy of config.json has (written at the start)
+        if isinstance(recorded, int) and checkpoint.theta.size != recorded:
+            raise RunFolderError(f"cannot resume from {self.path / 'checkpoint.npz'}: it holds {checkpoint.theta.size} "
+                                 f"parameters, and config.json's policy has {recorded}")
+        check_metrics(self.read_metrics(checkpoint.generation), checkpoint.generation, self.path / "metrics.csv")
 
     def write(self, write: Callable, name: str, *args) -> None:
         """``write(path / name, *args)``; an OSError becomes a SaveError naming the file."""
@@ -238,12 +296,7 @@ class RunFolder:
         self.checkpoint_generation = checkpoint.generation
 
     def load_checkpoint(self) -> Checkpoint:
-        path = self.path / "checkpoint.npz"
-        try:
-            checkpoint = Checkpoint.from_file(path)
-        except Exception as error:  # truncated, corrupt, or not a checkpoint at all
-            raise RunFolderError(f"cannot resume from {path}: not a readable checkpoint "
-                                 f"({type(error).__name__}); its run cannot be continued") from None
+        checkpoint = read_checkpoint(self.path / "checkpoint.npz")
         self.checkpoint_generation = checkpoint.generation
         self._remove_stale_temporaries()
         return checkpoint
@@ -256,6 +309,112 @@ class RunFolder:
                 shutil.rmtree(path, ignore_errors=True)
             else:
                 path.unlink(missing_ok=True)
+
+
+def read_checkpoint(path: Path) -> Checkpoint:
+    try:
+        return Checkpoint.from_file(path)
+    except Exception as error:  # truncated, corrupt, or not a checkpoint at all
+        raise RunFolderError(f"cannot resume from {path}: not a readable checkpoint "
+                             f"({type(error).__name__}); its run cannot be continued") from None
+
+
+_HELD_LOCKS: list[int] = []
+
+
+def release_locks() -> None:
+    """Release the run folders this process holds (at the end of a script's run; exiting does it too)."""
+    while _HELD_LOCKS:
+        os.close(_HELD_LOCKS.pop())
+
+
+def _locked_elsewhere(path: Path) -> bool:
+    """Whether another process holds the lock at ``path`` (tested with a shared lock, released at once)."""
+    try:
+        descriptor = os.open(path, os.O_RDONLY)
+    except FileNotFoundError:
+        return False
+    try:
+        fcntl.flock(descriptor, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        return False
+    except OSError:
+        return True
+    finally:
+        os.close(descriptor)
+
+
+def check_checkpoint(checkpoint: Checkpoint, es: ESSettings, obs_norm: bool, path: Path) -> None:
+    """Its numbers are finite, its sizes agree, and its optimiser and observation state are those of the
+    run's settings; else a RunFolderError naming what differs."""
+    def refuse(problem: str):
+        raise RunFolderError(f"cannot resume from {path}: {problem}; the checkpoint does not belong to this run's "
+                             "config.json, or was damaged")
+
+    dim = checkpoint.theta.size
+    if checkpoint.theta.ndim != 1 or dim == 0:
+        refuse(f"theta has shape {checkpoint.theta.shape}, not a vector of parameters")
+    if checkpoint.generation < 0:
+        refuse(f"generation {checkpoint.generation} is negative")
+    if len(checkpoint.fitness_log) != checkpoint.generation:
+        refuse(f"it has {len(checkpoint.fitness_log)} fitness values for {checkpoint.generation} generations")
+    if checkpoint.best_theta.size not in (0, dim):
+        refuse(f"best_theta has {checkpoint.best_theta.size} values, theta {dim}")
+    for name in ("lr", "sigma"):
+        if not (math.isfinite(getattr(checkpoint, name)) and getattr(checkpoint, name) > 0):
+            refuse(f"{name} is {getattr(checkpoint, name)}, not a positive number")
+    if checkpoint.total_steps < 0 or not math.isfinite(checkpoint.total_seconds):
+        refuse(f"total_steps {checkpoint.total_steps} or total_seconds {checkpoint.total_seconds} is impossible")
+    for name, array in _arrays(checkpoint):
+        if not np.issubdtype(array.dtype, np.number) or not np.isfinite(array).all():
+            refuse(f"{name} holds {'NaN or infinite values' if np.issubdtype(array.dtype, np.number) else array.dtype}")
+    _check_optimizer_state(checkpoint, es, refuse)
+    _check_observations(checkpoint, obs_norm, refuse)
+
+
+def _arrays(checkpoint: Checkpoint) -> list[tuple[str, np.ndarray]]:
+    """The arrays the run goes on from (the fitness log is only a record: a failed episode may be NaN)."""
+    found = [("theta", checkpoint.theta), ("best_theta", checkpoint.best_theta)]
+    for group in ("optimizer", "observations", "best_observations"):
+        found += [(f"{group}.{key}", np.asarray(array)) for key, array in getattr(checkpoint, group).items()]
+    return found
+
+
+def _check_optimizer_state(checkpoint: Checkpoint, es: ESSettings, refuse: Callable) -> None:
+    """The keys the run's optimiser keeps (those one step from nothing makes), each of theta's size but
+    for counters; a generation-0 checkpoint has none yet."""
+    dim = checkpoint.theta.size
+    zeros = np.zeros(dim, np.float32)
+    _, fresh = make_optimizer(es).step(zeros, zeros.astype(np.float64), 2, 1.0, 1.0, {})
+    state = checkpoint.optimizer
+    if set(state) != set(fresh) and (state or checkpoint.generation > 0):
+        refuse(f"its optimiser state ({', '.join(sorted(state)) or 'none'}) is not that of --optimizer "
+               f"{es.optimizer} ({', '.join(sorted(fresh)) or 'none'})")
+    for key, array in state.items():
+        expected = np.shape(fresh.get(key))
+        if np.shape(array) != expected:
+            refuse(f"optimizer.{key} has shape {np.shape(array)}, not {expected}")
+
+
+def _check_observations(checkpoint: Checkpoint, obs_norm: bool, refuse: Callable) -> None:
+    for group in ("observations", "best_observations"):
+        arrays = getattr(checkpoint, group)
+        if arrays and not obs_norm:
+            refuse(f"it holds {group} statistics, and config.json says the run does not normalise observations")
+        if not arrays:
+            continue
+        if set(arrays) != {"sum", "sumsq", "count"} or np.shape(arrays["sum"]) != np.shape(arrays["sumsq"]) \
+                or np.ndim(arrays["count"]) != 0 or float(arrays["count"]) <= 0 or (arrays["sumsq"] < 0).any():
+            refuse(f"its {group} statistics are not a running mean (sum, sumsq, count > 0 of one shape)")
+    if obs_norm and not checkpoint.observations and checkpoint.generation > 0:
+        refuse("config.json says the run normalises observations, and the checkpoint holds no statistics")
+
+
+def check_metrics(rows: list[dict], generation: int, path: Path) -> None:
+    """metrics.csv holds one row for each generation up to the checkpoint's, in order."""
+    numbers = [int(float(row["generation"])) for row in rows]
+    if numbers != list(range(1, generation + 1)):
+        raise RunFolderError(f"cannot resume: {path} holds generations {numbers[:3]}{'...' if len(numbers) > 3 else ''}"
+                             f" where the checkpoint has run {generation}; restore the run's own metrics.csv")
 
 
 def reward_label(mean_fitness: float) -> int:

@@ -15,6 +15,10 @@ Runs take hours to days on 2 cores (experiments/README.md). Each experiment has 
 (default runs/<experiment>_<kind>_seed<seed>); running the same command again resumes the newest
 run there from its checkpoint (--resume RUN_DIR, --generations being the total), and once training
 is complete it only evaluates. --dry-run prints the commands instead.
+
+Every value is checked before anything runs, --dry-run included, by the training script's own parser
+and checks (``check_training``); a folder whose run has other settings than the ones asked for
+(--seed, --popsize, ...) is refused, naming them, instead of being resumed with its own.
 """
 
 from __future__ import annotations
@@ -29,6 +33,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # the project's modules, when run as a script
 
+from cli.errors import USER_ERRORS, Parser, UserError, say  # noqa: E402
+from cli.flags import non_empty, positive_int, seed_value, threads_value  # noqa: E402
 from cli.hints import EVALUATE_SCRIPTS, TRAIN_SCRIPTS  # noqa: E402
 
 FILES = ROOT / "experiments" / "paper"
@@ -36,17 +42,19 @@ EXPERIMENTS = sorted({path.stem.split("_")[0] for path in FILES.glob("*.toml")})
 
 
 def parse(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser = Parser(prog="paper.py", description=__doc__.splitlines()[0],
+                    formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:]))
     parser.add_argument("experiment", choices=EXPERIMENTS)
     parser.add_argument("kind", choices=tuple(TRAIN_SCRIPTS))
-    parser.add_argument("--seed", type=int, default=None, help="seed of the training run (default: the file's)")
-    parser.add_argument("--popsize", type=int, default=None, help="default: the file's")
-    parser.add_argument("--generations", type=int, default=None, help="total generations (default: the file's)")
-    parser.add_argument("--episodes", type=int, default=None, help="evaluation episodes per body (default: the file's)")
-    parser.add_argument("--threads", type=int, default=None, help="workers; -1 = all cores (default: the file's)")
-    parser.add_argument("--folder", default=None, help="default: runs/<experiment>_<kind>_seed<seed>")
+    parser.add_argument("--seed", type=seed_value, default=None, help="seed of the training run (default: the file's)")
+    parser.add_argument("--popsize", type=positive_int, default=None, help="default: the file's")
+    parser.add_argument("--generations", type=positive_int, default=None,
+                        help="total generations (default: the file's)")
+    parser.add_argument("--episodes", type=positive_int, default=None,
+                        help="evaluation episodes per body (default: the file's)")
+    parser.add_argument("--threads", type=threads_value, default=None,
+                        help="workers; -1 = all cores (default: the file's)")
+    parser.add_argument("--folder", type=non_empty, default=None, help="default: runs/<experiment>_<kind>_seed<seed>")
     parser.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
     return parser.parse_args(argv)
 
@@ -61,12 +69,40 @@ def overrides(args: argparse.Namespace, *names: str) -> list[str]:
 
 
 def train_command(args: argparse.Namespace, file: Path, folder: Path) -> list[str]:
+    """A new run from the experiment file, or the resume of the folder's run; on resume, the settings asked
+    for are given again, so the training script refuses them where the run has others."""
     command = [sys.executable, str(ROOT / TRAIN_SCRIPTS[args.kind])]
     previous = latest_run(folder)
     if previous is not None:
-        return command + ["--resume", str(previous), *overrides(args, "generations", "threads")]
+        return command + ["--resume", str(previous), *overrides(args, "seed", "popsize", "generations", "threads")]
     return command + ["--config", str(file), "--folder", str(folder),
                       *overrides(args, "seed", "popsize", "generations", "threads")]
+
+
+def check_training(kind: str, command: list[str]) -> None:
+    """Check the training command as its script will (flags, experiment file, a resumed run's settings),
+    without running it: a UserError names the first problem; argparse's own errors exit with code 2."""
+    import importlib
+
+    from cli.config import TrainConfig
+    from cli.train import check_resume_flags, config_from_args, given_flags
+    from es.backends.process import check_workers
+    from es.runfolder import RunFolder
+
+    script = importlib.import_module(Path(TRAIN_SCRIPTS[kind]).stem)
+    argv = command[2:]
+    args = script.build_parser().parse_args(argv)
+    if args.resume is None:
+        run = config_from_args(kind, args, argv).run
+        if run.backend == "process" and not run.in_process:
+            check_workers(run.workers)
+        return
+    folder = RunFolder.existing(args.resume)
+    try:
+        config = TrainConfig.from_dict(folder.read_config())
+    except (ValueError, TypeError) as error:
+        raise UserError(f"{folder.path}: unreadable config.json ({error})") from None
+    check_resume_flags(config, args, given_flags(argv))
 
 
 def evaluate_command(args: argparse.Namespace, experiment: dict, run_dir: Path) -> list[str]:
@@ -86,7 +122,7 @@ def evaluate_command(args: argparse.Namespace, experiment: dict, run_dir: Path) 
 
 
 def run(command: list[str], dry_run: bool) -> int:
-    print("$ " + shlex.join(command), flush=True)
+    say("$ " + shlex.join(command))
     return 0 if dry_run else subprocess.run(command, cwd=ROOT).returncode
 
 
@@ -97,12 +133,18 @@ def main(argv: list[str] | None = None) -> int:
         experiment = tomllib.load(handle)
     seed = args.seed if args.seed is not None else experiment["run"]["seed"]
     folder = Path(args.folder or ROOT / "runs" / f"{args.experiment}_{args.kind}_seed{seed}")
-    code = run(train_command(args, file, folder), args.dry_run)
+    command = train_command(args, file, folder)
+    try:
+        check_training(args.kind, command)
+    except (*USER_ERRORS, ValueError) as error:
+        print(f"paper.py: error: {error}", file=sys.stderr)
+        return 2
+    code = run(command, args.dry_run)
     if code != 0:
         return code
     run_dir = latest_run(folder)
     if run_dir is None:  # a dry run before any training
-        print("# then, once the run exists, the evaluation of its last*.dat files", flush=True)
+        say("# then, once the run exists, the evaluation of its last*.dat files")
         run_dir = folder / "<run folder>"
     return run(evaluate_command(args, experiment, run_dir), args.dry_run)
 

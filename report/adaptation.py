@@ -8,17 +8,17 @@ so no display is ever needed.
 
 from __future__ import annotations
 
-import io
 from pathlib import Path
 
 import numpy as np
 
 from envs.evaluation import Trace
-from es import files
+from report.plots import write_figure
 
 
 def plot_adaptation(trace: Trace, path: str | Path) -> None:
-    """A PNG of the trace; drawn with matplotlib's Agg canvas, so no display is ever needed."""
+    """A picture of the trace (PNG, PDF or SVG, as the suffix says); drawn with matplotlib's Agg canvas, so
+    no display is ever needed."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     from matplotlib.ticker import MaxNLocator
@@ -47,6 +47,4 @@ def plot_adaptation(trace: Trace, path: str | Path) -> None:
         axes[1].legend(loc="best")
     axes[-1].set_xlabel("policy step")
     axes[-1].xaxis.set_major_locator(MaxNLocator(integer=True))
-    buffer = io.BytesIO()
-    figure.savefig(buffer, dpi=100, format="png")
-    files.atomic_write_bytes(Path(path), buffer.getvalue())
+    write_figure(figure, Path(path), dpi=100)

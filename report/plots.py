@@ -8,7 +8,7 @@ picks ``best.dat``). The comparison overlays the mean and best-so-far of several
 metrics.csv of an earlier version lacks, or a generation left empty, read as NaN.
 
 Drawing uses matplotlib's Agg canvas directly (no pyplot, so no global state and no display), and
-the PNG is written atomically like every other file of a run.
+the picture is written atomically like every other file of a run, in the format its suffix names.
 """
 
 from __future__ import annotations
@@ -87,17 +87,25 @@ def comparison_figure(runs: Sequence[tuple[str, Sequence[dict]]]):
     return figure
 
 
-def write_png(figure, path: Path) -> None:
+FIGURE_SUFFIXES = (".png", ".pdf", ".svg")  # the formats a figure is written in, named by the file's suffix
+
+
+def write_figure(figure, path: Path, **options) -> None:
+    """The figure, in the format its suffix names (one of FIGURE_SUFFIXES), written atomically."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in FIGURE_SUFFIXES:
+        raise ValueError(f"{path}: a figure is written as {', '.join(FIGURE_SUFFIXES)}, named by its suffix")
     buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", bbox_inches="tight")
-    files.atomic_write_bytes(Path(path), buffer.getvalue())
+    figure.savefig(buffer, format=suffix[1:], **options)
+    files.atomic_write_bytes(path, buffer.getvalue())
 
 
 def save_run_plot(path: Path, rows: Sequence[dict], title: str) -> None:
     """Write one run's learning curve to ``path`` (its ``fitness.png``)."""
-    write_png(run_figure(rows, title), path)
+    write_figure(run_figure(rows, title), path, bbox_inches="tight")
 
 
 def save_comparison(path: Path, runs: Sequence[tuple[str, Sequence[dict]]]) -> None:
     """Overlay several runs, given as (label, metrics rows), in one picture at ``path``."""
-    write_png(comparison_figure(runs), path)
+    write_figure(comparison_figure(runs), path, bbox_inches="tight")

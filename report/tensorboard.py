@@ -5,7 +5,9 @@ generation's metrics row and writes one scalar per numeric column (``metrics.csv
 generation as the step); values a generation does not have (NaN, empty) are left out. The writer is
 PyTorch's ``SummaryWriter``, which needs the optional ``tensorboard`` package
 (``requirements-tensorboard.txt``). After a resume, the generations between the checkpoint and the
-stop are written again: TensorBoard shows the later points.
+stop are run again: the writer starts with TensorBoard's purge marker at the first generation it
+writes (``SummaryWriter(purge_step=...)``), so TensorBoard drops the earlier events from that step
+on and each generation appears once.
 """
 
 from __future__ import annotations
@@ -47,11 +49,11 @@ class TensorBoardLog:
         self.writer = None
 
     def generation(self, row: dict) -> None:
-        if self.writer is None:
+        step = int(row["generation"])
+        if self.writer is None:  # the first generation this process writes; a resumed run's later events go
             from torch.utils.tensorboard import SummaryWriter
 
-            self.writer = SummaryWriter(log_dir=str(self.path))
-        step = int(row["generation"])
+            self.writer = SummaryWriter(log_dir=str(self.path), purge_step=step)
         for name, value in scalars(row, self.extra_columns).items():
             self.writer.add_scalar(name, value, step)
 

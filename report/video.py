@@ -1,17 +1,22 @@
 """Videos of evaluation episodes, written frame by frame as the environment renders them.
 
 The frames go to the file as they come (an H.264 mp4 through imageio's ffmpeg), so a long episode
-never accumulates in memory; odd frame sizes are padded to even ones, as the codec needs. While a
+never accumulates in memory; they go to a temporary file, renamed over the target when it closes;
+odd frame sizes are padded to even ones, as the codec needs. While a
 terminal watches, a progress line counts the frames written.
 """
 
 from __future__ import annotations
 
+import os
 import sys
+import tempfile
 from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+
+from es.files import _FILE_MODE
 
 VIDEO_SUFFIXES = (".mp4", ".mkv", ".mov", ".avi")  # containers ffmpeg writes H.264 into
 
@@ -70,7 +75,13 @@ class VideoRecorder(gym.Wrapper):
 
         height, width = shape[:2]
         self._pad = ((0, height % 2), (0, width % 2), (0, 0))
-        self._writer = imageio.get_writer(str(self.path), fps=self.fps, macro_block_size=1, codec="libx264",
+        # frames go to a temporary file beside the target (ending in the same suffix: ffmpeg picks the
+        # container by it), renamed over the target once closed
+        descriptor, temporary = tempfile.mkstemp(dir=self.path.parent, prefix=f".{self.path.name}.",
+                                                 suffix=f".tmp{self.path.suffix}")
+        os.close(descriptor)
+        self._temporary = Path(temporary)
+        self._writer = imageio.get_writer(temporary, fps=self.fps, macro_block_size=1, codec="libx264",
                                           pixelformat="yuv420p")
         if sys.stderr.isatty():
             from tqdm import tqdm
@@ -85,6 +96,8 @@ class VideoRecorder(gym.Wrapper):
         if self._writer is not None:
             self._writer.close()
             self._writer = None
+            os.chmod(self._temporary, _FILE_MODE)
+            os.replace(self._temporary, self.path)
 
     def close(self) -> None:
         self.finish()

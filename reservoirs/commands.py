@@ -16,6 +16,7 @@ on the same study.
 from __future__ import annotations
 
 import argparse
+import io
 import os
 import sys
 import time
@@ -30,13 +31,21 @@ from cli.errors import USER_ERRORS, Parser, UserError, explained
 from cli.errors import say as log
 from cli.flags import flag_value, positive_float, positive_int, seed_value
 from cli.hints import command  # hints by the interpreter and the script's absolute path: they work from any folder
-from es.files import atomic_write_text, write_json
+from es.files import atomic_write_bytes, atomic_write_text, write_json
+from es.outputs import check_output
 from reservoir_extra import SEARCH_BOUNDS
 from reservoirs import experiments
 from reservoirs.esn import ReservoirSettings
 from reservoirs.experiments import ENV_TYPES, TARGET_RETURN, SearchSpace, env_ids_for, reservoirs_from_params
-from reservoirs.study import (SAMPLERS, journal_path, load_evolved, open_study, recorded_settings, safe_file_name,
-                              study_name)
+from reservoirs.study import (
+    SAMPLERS,
+    journal_path,
+    load_evolved,
+    open_study,
+    recorded_settings,
+    safe_file_name,
+    study_name,
+)
 from reservoirs.training import InnerLoop, NoFinishedEpisode, PPOFrontEnd, make_base_env, train_ppo
 from reservoirs.wrappers import RewardsSavingWrapper
 
@@ -55,6 +64,13 @@ def new_parser(prog: str, description: str) -> Parser:
 def add_bool(parser: Parser, name: str, default: bool | None, help: str) -> None:
     """The original's 'True' / 'False' strings; the flag alone means True."""
     parser.add_argument(f"--{name}", type=flag_value, nargs="?", const=True, default=default, metavar="BOOL", help=help)
+
+
+def study_part(text: str) -> str:
+    """A part of a study's name (--h_test): not empty, since it names the journal and the output folders."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("is empty; give the experiment a name")
+    return text
 
 
 def add_training_steps(parser: Parser, **options) -> None:
@@ -99,7 +115,8 @@ def search_settings(args: argparse.Namespace, space: SearchSpace, **extra) -> di
 
 def evolve_res_parser(prog: str) -> Parser:
     parser = new_parser(prog, "Evolve the hyperparameters of one reservoir whose state a PPO agent learns from.")
-    parser.add_argument("--h_test", required=True, help="name of the experiment (part of the study's name)")
+    parser.add_argument("--h_test", type=study_part, required=True,
+                        help="name of the experiment (part of the study's name)")
     parser.add_argument("--env_id", required=True, help="Gymnasium id, or module:Id for a custom environment")
     add_bool(parser, "del_obs", False, "remove the velocities from the observation (DeletedVelocityWrapper)")
     add_search_flags(parser, None, True)
@@ -108,7 +125,8 @@ def evolve_res_parser(prog: str) -> Parser:
 
 def evolve_multi_res_parser(prog: str) -> Parser:
     parser = new_parser(prog, "Evolve the hyperparameters of several reservoirs read by one PPO agent.")
-    parser.add_argument("--h_test", default="Multi_RES", help="name of the experiment (part of the study's name)")
+    parser.add_argument("--h_test", type=study_part, default="Multi_RES",
+                        help="name of the experiment (part of the study's name)")
     parser.add_argument("--env_id", required=True, help="Gymnasium id, or module:Id for a custom environment")
     parser.add_argument("--nb_res", type=positive_int, default=3, help="number of reservoirs")
     add_bool(parser, "del_obs", False, "remove the velocities from the observation (DeletedVelocityWrapper)")
@@ -119,7 +137,8 @@ def evolve_multi_res_parser(prog: str) -> Parser:
 def evolve_generalization_parser(prog: str) -> Parser:
     parser = new_parser(prog, "Evolve reservoirs on several environments (mean normalised score), to test them "
                               "on an unseen one with test_generalization.py.")
-    parser.add_argument("--h_test", required=True, help="name of the experiment (part of the study's name)")
+    parser.add_argument("--h_test", type=study_part, required=True,
+                        help="name of the experiment (part of the study's name)")
     parser.add_argument("--env_type", required=True,
                         help=f"preset ({', '.join(ENV_TYPES)}) or ids separated by commas among "
                              f"{', '.join(TARGET_RETURN)}")
@@ -233,13 +252,15 @@ def add_test_flags(parser: Parser) -> None:
     """Flags of all three test scripts; None defaults are taken from the study, else the original's."""
     add = parser.add_argument
     add("--env_id", required=True, help="environment to train on (Gymnasium id, or module:Id)")
-    add("--h_test", required=True, help="the --h_test of the evolution")
+    add("--h_test", type=study_part, required=True, help="the --h_test of the evolution")
     add("--HP_training_steps", type=positive_int, default=300000, help="the --training_steps of the evolution")
     add_training_steps(parser, default=10000000, help="PPO training steps of each model")
     add("--seed", type=seed_value, default=None, help=f"seed of the reservoirs and PPO (default: ${SLURM_SEED}, else 0)")
     add("--units", type=positive_int, default=None, help="neurons per reservoir (default: the study's, else 100)")
     add_bool(parser, "skip_c", None, "as in the evolution (default: the study's, else False)")
     add_bool(parser, "zero_action", None, "as in the evolution (default: the study's, else False)")
+    add("--overwrite", action="store_true",
+        help="replace the models and summary of an earlier test with the same name (default: refuse)")
 
 
 def test_parser(prog: str) -> Parser:
@@ -312,7 +333,9 @@ def train_test_model(setup: TestSetup, env_id: str, seed: int, training_steps: i
     if model_name.startswith("RES"):
         env = setup.front_end.wrap(env, setup.reservoirs, seed)
     env = RewardsSavingWrapper(env)
-    train_ppo(env, seed, training_steps, learning_rate, str(logdir), model_path.stem).save(model_path)
+    buffer = io.BytesIO()  # SB3 writes its zip to the buffer; the file is replaced atomically
+    train_ppo(env, seed, training_steps, learning_rate, str(logdir), model_path.stem).save(buffer)
+    atomic_write_bytes(model_path, buffer.getvalue())
     env.close()
     episodes = len(env.episode_returns)
     mean_return = env.mean_reward(setup.ep_eval) if episodes else None
@@ -331,17 +354,20 @@ def test_models(args: argparse.Namespace, name: str, evolve_hint: str, several: 
     setup = load_test_setup(args, name, evolve_hint, env_id, several, nb_res, fixed_iss_default, seed)
     folder = safe_file_name(f"{args.env_id}_{args.h_test}")
     logdir, models_dir = Path("logs") / folder, Path("models") / folder
+    steps_label = f"{args.training_steps // 1000}k_steps_seed_{seed}"
+    chosen_models = MODELS_DEL_OBS if setup.del_obs else models
+    summary_path = models_dir / f"test_{steps_label}.json"
+    check_test_outputs([models_dir / f"{name}_{steps_label}.zip" for name in chosen_models] + [summary_path],
+                       args.overwrite)
     with explained("cannot create the output folders"):
         logdir.mkdir(parents=True, exist_ok=True)
         models_dir.mkdir(parents=True, exist_ok=True)
-    steps_label = f"{args.training_steps // 1000}k_steps_seed_{seed}"
     results = {}
-    for model_name, learning_rate in (MODELS_DEL_OBS if setup.del_obs else models).items():
+    for model_name, learning_rate in chosen_models.items():
         run_name = f"{model_name}_{steps_label}"
         results[model_name] = train_test_model(setup, env_id, seed, args.training_steps, model_name, learning_rate,
                                                logdir, models_dir / f"{run_name}.zip")
     best = setup.study.best_trial
-    summary_path = models_dir / f"test_{steps_label}.json"
     write_json(summary_path, {
         "study": name, "journal": str(journal_path(name)), "trial": best.number, "fitness": best.value,
         "params": best.params, "env_id": env_id, "seed": seed, "training_steps": args.training_steps,
@@ -349,6 +375,17 @@ def test_models(args: argparse.Namespace, name: str, evolve_hint: str, several: 
         "reservoirs": [asdict(one) for one in setup.reservoirs], "models": results})
     log(f"TensorBoard logs: {logdir} | summary: {summary_path}")
     return 0
+
+
+def check_test_outputs(paths: list[Path], overwrite: bool) -> None:
+    """Refuse, before any training, to replace an earlier test's models or summary unless --overwrite."""
+    earlier = [path for path in paths if path.exists()]
+    if earlier and not overwrite:
+        raise UserError(f"{earlier[0]} is from an earlier test ({len(earlier)} of its {len(paths)} files exist); give "
+                        "--overwrite to replace them, or another --seed, --training_steps or --h_test")
+    for path in earlier:
+        if not path.is_file():
+            raise UserError(f"{path} exists and is not a file; move it away")
 
 
 def test(prog: str, args: argparse.Namespace) -> int:
@@ -391,9 +428,7 @@ def get_random_scores(prog: str, args: argparse.Namespace) -> int:
         env_ids = [resolve_env(env_id.strip()) for env_id in args.env_ids.split(",") if env_id.strip()]
     if not env_ids:
         raise UserError(f"--env_ids {args.env_ids!r} names no environment; give ids separated by commas")
-    output = Path(args.output)
-    if output.is_dir() or not output.resolve().parent.is_dir():
-        raise UserError(f"--output {args.output} must be a file in an existing folder")
+    output = check_output("--output", args.output, (".txt",))  # never a file of a run, a journal or a folder
     lines = []
     for env_id in env_ids:
         with explained(f"cannot make {env_id}"):

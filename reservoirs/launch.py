@@ -17,6 +17,8 @@ def run_script(script: str, argv: list[str] | None = None) -> int:
     trial it interrupts as failed instead of leaving it running in the journal forever.
     """
     signal.signal(signal.SIGTERM, _interrupt)
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:  # a background job of a script: Ctrl-C's meaning back
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     missing = missing_packages(TEST_MODULES if script.startswith("test") else EXTRA_MODULES)
     if missing:
         print(f"{script}.py: error: the ER-MRL scripts need {', '.join(missing)}, not installed here; {INSTALL_HINT}",

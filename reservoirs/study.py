@@ -9,11 +9,21 @@ used (deprecated since optuna 4.0), so the original's journals load here.
 
 A study also records the settings it was created with (units, skip_c, ...): a later process that
 would mix other settings into it is refused, and the test scripts rebuild the reservoirs it evolved.
+
+A journal is data someone may hand you, but optuna's CMA-ES sampler keeps its optimiser in it as a
+pickle (hex text split over the trial's system attributes ``cma:...:optimizer:0``, ``:1``, ...; optuna
+4's ``samplers/_cmaes.py``) and unpickles it when the study continues. So before optuna reads a
+journal, every such pickle in it is loaded once through ``SafeUnpickler``, which builds only the
+classes the sampler stores there (the ``cmaes`` optimisers, numpy arrays, dtypes and scalars);
+a journal holding anything else is refused and left as it was.
 """
 
 from __future__ import annotations
 
+import io
 import json
+import pickle
+import re
 import warnings
 from pathlib import Path
 
@@ -72,7 +82,8 @@ def open_journal(path: Path) -> JournalStorage:
 
 def check_journal(path: Path) -> None:
     """Refuse a journal with a line that is not JSON, before optuna reads or appends to it: optuna skips
-    a bad last line at first and fails on it in the middle of a trial once it has appended after it."""
+    a bad last line at first and fails on it in the middle of a trial once it has appended after it.
+    Then refuse one whose sampler state is not plain data (``check_pickles``)."""
     if not path.is_file():
         return
     with open(path, "rb") as handle:
@@ -84,6 +95,83 @@ def check_journal(path: Path) -> None:
             except ValueError:
                 raise ValueError(f"the journal {path} is corrupt (line {number} is not JSON); move it away, or give "
                                  "another --h_test") from None
+    check_pickles(path)
+
+
+# (module, name) of every global a genuine CmaEsSampler pickle names: its optimisers (CMA; SepCMA with
+# use_separable_cma; CMAwM with_margin) and the numpy pieces of their arrays, under numpy 1's and 2's paths
+SAFE_GLOBALS = frozenset({
+    ("cmaes._cma", "CMA"), ("cmaes._sepcma", "SepCMA"), ("cmaes._cmawm", "CMAwM"),
+    ("numpy", "ndarray"), ("numpy", "dtype"),
+    *((module, name) for module in ("numpy.core.multiarray", "numpy._core.multiarray")
+      for name in ("_reconstruct", "scalar")),
+    *(("builtins", name) for name in ("complex", "frozenset", "set", "slice", "range", "bytearray")),
+})
+OPTIMIZER_KEY = re.compile(r"(cma|sepcma|cmawm):(\w+:restart_\d+:)?optimizer")  # optuna's optimizer_key_template
+
+
+class UnsafeJournal(ValueError):
+    """A journal whose pickled sampler state names a class outside SAFE_GLOBALS."""
+
+
+class SafeUnpickler(pickle.Unpickler):
+    """Builds only the globals in SAFE_GLOBALS; any other is refused before it is imported."""
+
+    def find_class(self, module: str, name: str):
+        if (module, name) not in SAFE_GLOBALS:
+            raise UnsafeJournal(f"{module}.{name}")
+        return super().find_class(module, name)
+
+
+def safe_loads(data: bytes):
+    return SafeUnpickler(io.BytesIO(data)).load()
+
+
+def optimizer_pickles(system_attrs: dict) -> dict[str, str | None]:
+    """The pickles optuna's CmaEsSampler would unpickle from a trial's system attributes, as it joins them
+    (the keys starting with an optimizer key, values ``<key>:0`` .. ``<key>:<n-1>`` in order): key -> hex
+    text, or None where the parts do not join."""
+    found = {}
+    for base in {match.group(0) for key in system_attrs if (match := OPTIMIZER_KEY.match(str(key)))}:
+        count = sum(1 for key in system_attrs if str(key).startswith(base))
+        parts = [system_attrs.get(f"{base}:{index}") for index in range(count)]
+        found[base] = "".join(parts) if all(isinstance(part, str) for part in parts) else None
+    return found
+
+
+def check_pickles(path: Path) -> None:
+    """Load every pickle optuna could unpickle from the journal through SafeUnpickler; refuse the journal
+    if one names another class or does not decode (for a trial still running, another process may be
+    writing its parts: only a forbidden class counts there)."""
+    storage = open_journal(path)
+    try:
+        trials = [trial for study in storage.get_all_studies() for trial in storage.get_all_trials(study._study_id)]
+    except Exception as error:  # a line optuna cannot replay
+        raise ValueError(f"the journal {path} is corrupt ({type(error).__name__}: {error}); move it away, or give "
+                         "another --h_test") from None
+    for trial in trials:
+        finished = trial.state.is_finished()
+        for key, text in optimizer_pickles(trial.system_attrs).items():
+            try:
+                if text is None:
+                    raise ValueError("its parts do not join")
+                optimizer = safe_loads(bytes.fromhex(text))
+                if not any(isinstance(optimizer, cls) for cls in _optimizer_classes()):
+                    raise ValueError(f"it holds a {type(optimizer).__name__}, not a CMA-ES optimiser")
+            except UnsafeJournal as error:
+                raise UnsafeJournal(f"refused the journal {path}: trial {trial.number}'s {key} is a pickle that "
+                                    f"asks for {error}, which is not CMA-ES sampler state and could run code; "
+                                    "it was left as it was") from None
+            except Exception as error:
+                if finished:
+                    raise ValueError(f"the journal {path} is corrupt: trial {trial.number}'s {key} is not CMA-ES "
+                                     f"sampler state ({type(error).__name__}: {error})") from None
+
+
+def _optimizer_classes() -> tuple[type, ...]:
+    import cmaes
+
+    return cmaes.CMA, cmaes.SepCMA, cmaes.CMAwM
 
 
 def open_study(name: str, settings: dict, sampler: str, sampler_seed: int | None) -> optuna.Study:

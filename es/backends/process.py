@@ -14,6 +14,7 @@ from __future__ import annotations
 import collections
 import ctypes
 import multiprocessing as mp
+import os
 import signal
 import sys
 import time
@@ -27,6 +28,17 @@ from es.noise import NoiseTable, attach_shared
 from es.worker import Worker, pin_threads
 
 CLOSE_SECONDS = 2.0  # how long closing waits for workers to finish before ending them
+
+
+MAX_WORKERS_PER_CORE = 4  # beyond this, more processes only add memory and switching, never speed
+
+
+def check_workers(workers: int) -> None:
+    """Refuse a pool far larger than the machine: each worker is a Python process with its own environments."""
+    cores = os.cpu_count() or 1
+    if workers > MAX_WORKERS_PER_CORE * cores:
+        raise ValueError(f"--threads {workers} would start {workers} worker processes on this machine's {cores} cores; "
+                         f"give at most {MAX_WORKERS_PER_CORE * cores}, or -1 for one per core")
 
 
 def _die_with_parent() -> None:
@@ -136,6 +148,7 @@ class ProcessEvaluator:
                  env_ids: tuple[str, ...], workers: int):
         if noise.name is None:
             raise ValueError("the process pool needs a noise table in shared memory")
+        check_workers(workers)
         self.env_ids, self.workers = env_ids, workers
         self._args = (build_problem, noise.name, noise.size)
         self._dim = dim
@@ -147,7 +160,8 @@ class ProcessEvaluator:
         self._slots: list[_Slot] = []
         self._chunks = ChunkSizer(workers)
         try:
-            self._slots = [self._spawn() for _ in range(workers)]  # they start in parallel
+            for _ in range(workers):  # they start in parallel; each one kept at once, for close() to end it
+                self._slots.append(self._spawn())
             for slot in self._slots:
                 self._await_ready(slot)
         except BaseException:

@@ -35,8 +35,10 @@ ROOT = Path(__file__).resolve().parent.parent.parent
 sys.path.insert(0, str(ROOT))  # the project's modules, when run as a script
 
 import envs  # noqa: E402
+from cli.errors import Parser, say  # noqa: E402
 from cli.flags import positive_int, seed_value, threads_value  # noqa: E402
 from cli.hints import EVALUATE_FLAGS, EVALUATE_SCRIPTS, TRAIN_SCRIPTS  # noqa: E402
+from es.files import atomic_write_text  # noqa: E402
 from es.runfolder import named_file  # noqa: E402
 from experiments.paper import latest_run, run  # noqa: E402
 
@@ -58,9 +60,8 @@ ARMS = {
 def parse(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
     extra = argv[argv.index("--") + 1:] if "--" in argv else []
     argv = argv[:argv.index("--")] if "--" in argv else argv
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser = Parser(prog="compare.py", description=__doc__.splitlines()[0],
+                    formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:]))
     parser.add_argument("--environment", default=DEFAULT_ENV, help="training environment(s), as the scripts take them")
     parser.add_argument("--evaluate_on", default=None, help="evaluation environment(s); default: --environment")
     parser.add_argument("--arms", nargs="+", choices=list(ARMS), default=list(ARMS), metavar="ARM",
@@ -75,12 +76,27 @@ def parse(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
     parser.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
     args = parser.parse_args(argv)
     args.folder = args.folder.resolve()  # the scripts run in the repository root
+    resolved = []
     for flag, ids in (("--environment", args.environment), ("--evaluate_on", args.evaluate_on or "")):
         try:  # before hours of training, not at the first evaluation
-            [envs.resolve_env_id(env_id.strip(), notify=lambda line: None) for env_id in ids.split(",") if env_id.strip()]
+            resolved += [envs.resolve_env_id(env_id.strip(), notify=lambda line: None) for env_id in ids.split(",")
+                         if env_id.strip()]
         except envs.EnvironmentError_ as error:
             parser.error(f"{flag}: {error}")
+    try:
+        check_sizes(tuple(dict.fromkeys(resolved)))
+    except ValueError as error:
+        parser.error(f"--evaluate_on {args.evaluate_on}: {error}")
     return args, extra
+
+
+def check_sizes(env_ids: tuple[str, ...]) -> None:
+    """The training and evaluation environments make one network (observation and action sizes): each is
+    made once, as a run would, and refused here if it does not fit."""
+    from envs import ProblemSpec
+    from policies import PolicySettings
+
+    ProblemSpec(env_ids, PolicySettings()).build().close()
 
 
 def train_command(args: argparse.Namespace, extra: list[str], arm: str, seed: int, folder: Path) -> list[str]:
@@ -151,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
             succeeded(train_command(args, extra, arm, seed, folder), args.dry_run)
             run_dir = latest_run(folder)
             if run_dir is None:  # a dry run
-                print(f"# then the evaluation of {folder}/<run folder>/last*.dat", flush=True)
+                say(f"# then the evaluation of {folder}/<run folder>/last*.dat")
                 continue
             command = evaluate_command(args, arm, run_dir)
             if not evaluated(run_dir, command):
@@ -159,14 +175,14 @@ def main(argv: list[str] | None = None) -> int:
             if args.dry_run:
                 continue
             results.setdefault(arm, {})[seed] = json.loads((run_dir / "evaluation.json").read_text())
-            print(f"# {arm}, seed {seed}: {time.perf_counter() - started:.0f} s", flush=True)
+            say(f"# {arm}, seed {seed}: {time.perf_counter() - started:.0f} s")
     if args.dry_run:
         return 0
     text = table(results, args.seeds)
-    print(text)
+    say(text)
     args.folder.mkdir(parents=True, exist_ok=True)
-    (args.folder / "results.md").write_text(text + "\n")
-    (args.folder / "results.json").write_text(json.dumps(results, indent=1))
+    atomic_write_text(args.folder / "results.md", text + "\n")
+    atomic_write_text(args.folder / "results.json", json.dumps(results, indent=1))
     return 0
 
 

@@ -1,0 +1,362 @@
+"""Bad input, through the real scripts as processes: flags, TOML, hand-edited config.json, crafted
+checkpoints and journals, outputs aimed at a run's files, and faults (issue 20).
+
+Each case copies one small real run folder (CartPole-v1, popsize 4, 2 generations, observation
+normalisation and Adam, so that every kind of array is in its checkpoint), damages it or aims a command
+at it, runs the script, and asserts: exit code 2; one line on stderr, no traceback; every file under
+the case's folder byte-identical before and after, and no file or folder added or removed; no marker
+file from a payload. The journal cases need the ER-MRL extra and skip without it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import json
+import os
+import pickle
+import shutil
+import subprocess
+import sys
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+BASE_ENV = {**os.environ, "SDL_VIDEODRIVER": "dummy", "MUJOCO_GL": "egl", "PYTHONUNBUFFERED": "1"}
+MARKER = "PAYLOAD_RAN"
+RUN = ("--environment", "CartPole-v1", "--popsize", "4", "--generations", "2", "--threads", "1", "--seed", "1",
+       "--obs_norm", "--optimizer", "adam")
+
+
+@pytest.fixture(scope="module")
+def run_folder(tmp_path_factory) -> Path:
+    """One real run, made once for the module; each case works on its own copy."""
+    folder = tmp_path_factory.mktemp("bad_inputs_run")
+    result = subprocess.run([sys.executable, str(ROOT / "train_static.py"), *RUN, "--folder", str(folder)], cwd=ROOT,
+                            env=BASE_ENV, check=False, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    (run,) = folder.iterdir()
+    (run / ".lock").unlink()  # held by the process that trained it, now gone
+    return run
+
+
+def snapshot(folder: Path) -> dict[str, str]:
+    """Every path under ``folder``: a file's SHA-256, or 'folder'."""
+    return {str(path.relative_to(folder)): hashlib.sha256(path.read_bytes()).hexdigest() if path.is_file() else "folder"
+            for path in sorted(folder.rglob("*"))}
+
+
+# --- damage -------------------------------------------------------------------------------------
+
+
+def edit_checkpoint(run: Path, **changes: Callable[[np.ndarray], np.ndarray]) -> None:
+    """Rewrite checkpoint.npz with some arrays changed (``theta=lambda a: ...``; a dotted key as ``optimizer__m``)."""
+    with np.load(run / "checkpoint.npz") as saved:
+        arrays = {key: saved[key] for key in saved.files}
+    for key, change in changes.items():
+        key = key.replace("__", ".")
+        arrays[key] = change(arrays[key].copy())
+    np.savez(run / "checkpoint.npz", **arrays)
+
+
+def set_first(value: float) -> Callable[[np.ndarray], np.ndarray]:
+    def change(array: np.ndarray) -> np.ndarray:
+        array.flat[0] = value
+        return array
+    return change
+
+
+def edit_config(run: Path, section: str, key: str, value) -> None:
+    data = json.loads((run / "config.json").read_text())
+    data[section][key] = value
+    (run / "config.json").write_text(json.dumps(data))
+
+
+def drop_metrics_row(run: Path) -> None:
+    lines = (run / "metrics.csv").read_text().splitlines(keepends=True)
+    (run / "metrics.csv").write_text("".join(lines[:1] + lines[2:]))
+
+
+@dataclass
+class HeldLock:
+    descriptor: int
+
+
+def hold_lock(run: Path) -> HeldLock:
+    """Hold the run's lock from this process, as a training process resuming it would."""
+    import fcntl
+
+    descriptor = os.open(run / ".lock", os.O_RDWR | os.O_CREAT)
+    fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    return HeldLock(descriptor)
+
+
+# --- journals (the ER-MRL extra) ------------------------------------------------------------------
+
+EVOLVE = ("--env_id", "CartPole-v1", "--h_test", "t", "--training_steps", "2048", "--nb_seeds", "1",
+          "--sampler", "Cmaes", "--sampler_seed", "3")
+STUDY = "CartPole-v1_t_2k_steps"
+
+
+EXTRA = ("optuna", "cmaes", "reservoirpy", "stable_baselines3")
+EXTRA_REASON = "the ER-MRL extra is optional: pip install -r requirements-reservoirs.txt"
+
+
+def has_extra() -> bool:
+    return all(importlib.util.find_spec(module) is not None for module in EXTRA)
+
+
+def genuine_journal(work: Path, trials: int = 9) -> Path:
+    """A CMA-ES study as evolve_res.py records it (its settings, sampler, search space), with a cheap
+    objective instead of PPO. The sampler pickles its optimiser once a generation (6 trials for two
+    parameters) has been told, from the 8th trial on."""
+    import optuna
+
+    from reservoirs.commands import evolve_res_parser, search_settings, search_space
+    from reservoirs.study import journal_path, open_study
+
+    args = evolve_res_parser("evolve_res.py").parse_args([*EVOLVE, "--nb_trials", "1"])
+    space = search_space(args, 1, suffixed=False)
+    previous = Path.cwd()
+    os.chdir(work)
+    try:
+        optuna.logging.set_verbosity(optuna.logging.ERROR)
+        study = open_study(STUDY, search_settings(args, space, env=args.env_id, del_obs=args.del_obs), "Cmaes", 3)
+        study.optimize(lambda trial: -abs(np.log(space.sample(trial)[0].spectral_radius)), n_trials=trials)
+        return work / journal_path(STUDY)
+    finally:
+        os.chdir(previous)
+
+
+class Payload:
+    """Unpickled, it creates the marker file: what a crafted journal would run."""
+
+    def __init__(self, path: Path):
+        self.path = str(path)
+
+    def __reduce__(self):
+        return (open, (self.path, "w"))
+
+
+def crafted_journal(work: Path) -> Path:
+    """A genuine journal plus one finished trial whose CMA-ES optimiser attribute is a payload."""
+    journal = genuine_journal(work)
+    lines = [json.loads(line) for line in journal.read_text().splitlines()]
+    worker, trial_id = lines[-1]["worker_id"], sum(1 for line in lines if line["op_code"] == 4)
+    key = next(key for line in lines for key in line.get("system_attr", {}) if key.endswith("optimizer:0"))
+    appended = [{"op_code": 4, "worker_id": worker, "study_id": 0, "datetime_start": "2026-01-01T00:00:00.000000"},
+                {"op_code": 9, "worker_id": worker, "trial_id": trial_id,
+                 "system_attr": {key: pickle.dumps(Payload(work / MARKER)).hex()}},
+                {"op_code": 6, "worker_id": worker, "trial_id": trial_id, "state": 1, "values": [1.0],
+                 "datetime_complete": "2026-01-01T00:00:01.000000"}]
+    with open(journal, "a") as handle:
+        handle.writelines(json.dumps(line) + "\n" for line in appended)
+    return journal
+
+
+def earlier_test_summary(work: Path) -> None:
+    genuine_journal(work)
+    models = work / "models" / "CartPole-v1_t"
+    models.mkdir(parents=True)
+    (models / "test_2k_steps_seed_0.json").write_text('{"earlier": true}\n')
+
+
+# --- the cases ------------------------------------------------------------------------------------
+
+
+@dataclass
+class Case:
+    argv: Callable[[Path, Path], list[str]]  # (run copy, case folder) -> script and its arguments
+    expect: str  # in the error line
+    prepare: Callable[[Path, Path], object] = lambda run, work: None
+    env: dict = field(default_factory=dict)  # changes to the environment; None removes a variable
+    extra: bool = False  # needs the ER-MRL extra
+
+
+def train(*words) -> Callable[[Path, Path], list[str]]:
+    return lambda run, work: ["train_static.py", *[word(run, work) if callable(word) else word for word in words]]
+
+
+def evaluate(*words) -> Callable[[Path, Path], list[str]]:
+    return lambda run, work: ["evaluate_static.py", "--environment", "CartPole-v1", "--path_weights",
+                              str(run / "last.dat"), *[word(run, work) if callable(word) else word for word in words]]
+
+
+def resume(run: Path, work: Path) -> list[str]:
+    return ["train_static.py", "--resume", str(run), "--generations", "3"]
+
+
+def in_run(name: str) -> Callable[[Path, Path], str]:
+    return lambda run, work: str(run / name)
+
+
+def link_to_config(run: Path, work: Path) -> None:
+    (work / "out.json").symlink_to(run / "config.json")
+
+
+CASES = {
+    # flags and faults
+    "threads far above the cores": Case(train(*RUN[:6], "--threads", "1000", "--folder", lambda r, w: str(w / "new")),
+                                        "--threads 1000 would start 1000 worker processes"),
+    "render without a display": Case(evaluate("--render"), "no display",
+                                     env={"DISPLAY": None, "SDL_VIDEODRIVER": "dummy"}),
+    "MUJOCO_GL that Gymnasium cannot render": Case(
+        lambda run, work: ["evaluate_static.py", "--environment", "Ant-v5", "--path_weights", str(run / "last.dat"),
+                           "--video", str(work / "ant.mp4")], "MUJOCO_GL=glx",
+        env={"DISPLAY": None, "MUJOCO_GL": "glx"}),
+    # outputs aimed at a run's files, or at an input
+    "--json the checkpoint": Case(evaluate("--json", in_run("checkpoint.npz")), "checkpoint.npz of the run folder"),
+    "--json the statistics": Case(evaluate("--json", in_run("last.obs_norm.npz")),
+                                  "last.obs_norm.npz of the run folder"),
+    "--json config.json": Case(evaluate("--json", in_run("config.json")), "config.json of the run folder"),
+    "--json a link to config.json": Case(evaluate("--json", lambda r, w: str(w / "out.json")),
+                                         "config.json of the run folder", prepare=link_to_config),
+    "--plot a weight file": Case(evaluate("--plot", in_run("best.dat")), "best.dat of the run folder"),
+    "--json the weight file": Case(evaluate("--json", in_run("last.dat")), "which this command reads"),
+    "--video a new name without a video suffix": Case(evaluate("--video", lambda r, w: str(w / "v.json")),
+                                                      "give a name ending in .mp4"),
+    "--plot the run's fitness.png": Case(evaluate("--plot", in_run("fitness.png")), "fitness.png of the run folder"),
+    "--video the metrics": Case(evaluate("--video", in_run("metrics.csv")), "metrics.csv of the run folder"),
+    "--json and --plot one file": Case(evaluate("--json", lambda r, w: str(w / "a.json"), "--plot",
+                                                lambda r, w: str(w / "a.json")), "are the same file"),
+    "plot_run.py -o the metrics": Case(lambda run, work: ["plot_run.py", str(run), "-o", str(run / "metrics.csv")],
+                                       "which this command reads"),
+    "plot_run.py -o fitness.png": Case(lambda run, work: ["plot_run.py", str(run), "-o", str(run / "fitness.png")],
+                                       "fitness.png of the run folder"),
+    "plot_run.py -o x.jpg": Case(lambda run, work: ["plot_run.py", str(run), "-o", str(work / "x.jpg")],
+                                 "give a name ending in .png"),
+    # TOML
+    "TOML syntax error": Case(
+        train("--config", lambda r, w: str(w / "bad.toml"), "--folder", lambda r, w: str(w / "new")), "bad.toml",
+        prepare=lambda run, work: (work / "bad.toml").write_text("[es\npopsize = 4\n")),
+    "TOML value of the wrong type": Case(
+        train("--config", lambda r, w: str(w / "bad.toml"), "--folder", lambda r, w: str(w / "new")), "popsize",
+        prepare=lambda run, work: (work / "bad.toml").write_text('[es]\npopsize = "four"\n')),
+    # hand-edited config.json
+    "a standard-library recipe module": Case(resume, "standard library",
+                                             prepare=lambda run, work: edit_config(run, "env", "recipe_modules",
+                                                                                   ["this"])),
+    "a module path in an environment id": Case(
+        resume, "not a plain dotted module name",
+        prepare=lambda run, work: edit_config(run, "env", "env_ids", ["../../evil:CartPole-v1"])),
+    "a standard-library module in an environment id": Case(
+        resume, "standard library", prepare=lambda run, work: edit_config(run, "env", "env_ids", ["antigravity:X-v0"])),
+    "another optimizer in config.json": Case(resume, "not that of --optimizer sgd",
+                                             prepare=lambda run, work: edit_config(run, "es", "optimizer", "sgd")),
+    "obs_norm turned off in config.json": Case(resume, "does not normalise observations",
+                                               prepare=lambda run, work: edit_config(run, "policy", "obs_norm", False)),
+    # crafted checkpoints and run files
+    "NaN in theta": Case(resume, "theta holds NaN",
+                         prepare=lambda run, work: edit_checkpoint(run, theta=set_first(np.nan))),
+    "inf in theta": Case(resume, "theta holds NaN or infinite",
+                         prepare=lambda run, work: edit_checkpoint(run, theta=set_first(np.inf))),
+    "inf in the observation mean": Case(resume, "observations.sum holds NaN or infinite", prepare=lambda run, work:
+                                        edit_checkpoint(run, observations__sum=set_first(np.inf))),
+    "NaN in Adam's state": Case(resume, "optimizer.m holds NaN",
+                                prepare=lambda run, work: edit_checkpoint(run, optimizer__m=set_first(np.nan))),
+    "negative generation": Case(resume, "generation -1 is negative",
+                                prepare=lambda run, work: edit_checkpoint(run, generation=lambda a: np.array(-1))),
+    "theta of another size": Case(resume, "config.json's policy has",
+                                  prepare=lambda run, work: edit_checkpoint(run, theta=lambda a: a[:-3],
+                                                                            best_theta=lambda a: a[:-3],
+                                                                            optimizer__m=lambda a: a[:-3],
+                                                                            optimizer__v=lambda a: a[:-3])),
+    "Adam's state of another size": Case(resume, "optimizer.v has shape",
+                                         prepare=lambda run, work: edit_checkpoint(run, optimizer__v=lambda a: a[:5])),
+    "a generation missing from metrics.csv": Case(resume, "metrics.csv holds generations",
+                                                  prepare=lambda run, work: drop_metrics_row(run)),
+    "a checkpoint that is not one": Case(resume, "not a readable checkpoint",
+                                         prepare=lambda run, work: (run / "checkpoint.npz").write_bytes(
+                                             b"PK\x03\x04junk")),
+    "NaN in the evaluated statistics": Case(evaluate(), "not an observation statistics file", prepare=lambda run, work:
+                                            np.savez(run / "last.obs_norm.npz", mean=np.full(4, np.nan), std=np.ones(4),
+                                                     clip=np.array(np.nan), observations=np.array(10))),
+    "a folder another process holds": Case(resume, "in use by another process",
+                                           prepare=lambda run, work: hold_lock(run)),
+    # the experiment scripts
+    "paper.py --dry-run with a bad value": Case(lambda run, work: ["experiments/paper.py", "ant", "static", "--dry-run",
+                                                                   "--popsize", "1"], "--popsize must be at least 2"),
+    "paper.py on a folder with other settings": Case(
+        lambda run, work: ["experiments/paper.py", "ant", "static", "--dry-run", "--popsize", "8", "--folder",
+                           str(work)],
+        "--popsize 8 (the run has 4)"),
+    "compare.py with --evaluate_on of other sizes": Case(
+        lambda run, work: ["experiments/reservoir_front/compare.py", "--environment", "CartPole-v1", "--evaluate_on",
+                           "CartPole-v1,Pendulum-v1", "--folder", str(work / "front"), "--dry-run"],
+        "must share observation and action sizes"),
+    # ER-MRL
+    "an empty --h_test": Case(lambda run, work: ["scripts/evolve_res.py", *EVOLVE[:2], "--h_test", " ", *EVOLVE[4:],
+                                                 "--nb_trials", "1"], "argument --h_test: is empty", extra=True),
+    "a journal whose CMA-ES state runs code": Case(
+        lambda run, work: ["scripts/evolve_res.py", *EVOLVE, "--nb_trials", "1"], "could run code",
+        prepare=lambda run, work: crafted_journal(work), extra=True),
+    "test.py on a journal whose CMA-ES state runs code": Case(
+        lambda run, work: ["scripts/test.py", *EVOLVE[:4], "--HP_training_steps", "2048", "--training_timesteps", "64"],
+        "could run code", prepare=lambda run, work: crafted_journal(work), extra=True),
+    "test.py over an earlier test": Case(
+        lambda run, work: ["scripts/test.py", *EVOLVE[:4], "--HP_training_steps", "2048", "--training_timesteps",
+                           "2048"],
+        "is from an earlier test", prepare=lambda run, work: earlier_test_summary(work), extra=True),
+}
+
+
+@dataclass
+class Outcome:
+    result: subprocess.CompletedProcess
+    work: Path
+    before: dict[str, str]
+
+
+def run_case(case: Case, run_folder: Path, work: Path) -> tuple[list[str], dict, Path, object]:
+    """Copy the run, apply the case's damage (in this thread: some change the working folder); the command."""
+    run = work / run_folder.name
+    shutil.copytree(run_folder, run)
+    held = case.prepare(run, work)
+    environ = {**BASE_ENV, **{key: value for key, value in case.env.items() if value is not None}}
+    for key, value in case.env.items():
+        if value is None:
+            environ.pop(key, None)
+    argv = case.argv(run, work)
+    return [sys.executable, str(ROOT / argv[0]), *argv[1:]], environ, work, held
+
+
+@pytest.fixture(scope="module")
+def outcomes(run_folder, tmp_path_factory, request) -> dict[str, Outcome]:
+    """The selected cases, prepared one by one, their commands run two at a time (or one per core)."""
+    selected = {item.callspec.params["name"] for item in request.session.items
+                if item.module is request.module and hasattr(item, "callspec")}
+    names = [name for name in CASES if name in selected and (not CASES[name].extra or has_extra())]
+    prepared = {name: run_case(CASES[name], run_folder, tmp_path_factory.mktemp("case")) for name in names}
+    befores = {name: snapshot(work) for name, (_, _, work, _) in prepared.items()}
+
+    def execute(name: str) -> subprocess.CompletedProcess:
+        command, environ, work, _ = prepared[name]
+        return subprocess.run(command, cwd=work, env=environ, check=False, capture_output=True, text=True, timeout=300)
+
+    try:
+        with ThreadPoolExecutor(max(2, os.cpu_count() or 1)) as pool:
+            results = dict(zip(names, pool.map(execute, names)))
+    finally:
+        for *_, held in prepared.values():
+            if isinstance(held, HeldLock):
+                os.close(held.descriptor)
+    return {name: Outcome(results[name], prepared[name][2], befores[name]) for name in names}
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_bad_input_is_one_line_exit_2_and_changes_nothing(name, outcomes):
+    if CASES[name].extra and not has_extra():
+        pytest.skip(EXTRA_REASON)
+    result, work = outcomes[name].result, outcomes[name].work
+    lines = result.stderr.splitlines()
+    assert result.returncode == 2, (result.returncode, result.stdout[-2000:], result.stderr[-3000:])
+    assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
+    assert CASES[name].expect in lines[0], lines[0]
+    assert not (work / MARKER).exists(), "the payload ran"
+    assert snapshot(work) == outcomes[name].before
+    assert "Beautiful is better than ugly" not in result.stdout  # the standard library's `this` was not imported
