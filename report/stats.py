@@ -10,8 +10,8 @@ scores are summarised, through ``rliable`` (the authors' library), by:
 - the probability of improvement P(X > Y) of every group over every other (the Mann-Whitney U
   statistic over the pairs of runs, ties counting one half), with its bootstrap interval.
 
-Every bootstrap draws from its own ``numpy.random.RandomState(seed)``, so a report is the same
-every time for a fixed ``--seed``. A report compares runs of ONE task: rliable's aggregates over
+Every bootstrap starts from ``--seed`` (``_seeded``), so a report is the same every time for a
+fixed seed. A report compares runs of ONE task: rliable's aggregates over
 several tasks need scores on a common scale, which raw returns of different environments are not.
 
 The score of a run (``--score``):
@@ -202,11 +202,20 @@ def _column(values) -> np.ndarray:
     return np.asarray(list(values), dtype=np.float64).reshape(-1, 1)
 
 
-def _quiet(call, *args, **kwargs):
-    """rliable passes arch a RandomState through its deprecated ``random_state`` keyword."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", FutureWarning)
-        return call(*args, **kwargs)
+def _seeded(seed: int, call, *args, **kwargs):
+    """``call`` with numpy's global generator seeded, and restored afterwards.
+
+    rliable 1.2.0's stratified bootstraps draw their indices from ``np.random.choice`` (the global
+    generator) whatever ``random_state`` they are given, so a fixed seed is set there for the call; the
+    RandomState is passed too (arch's own draws), through arch's deprecated keyword, hence the filter."""
+    saved = np.random.get_state()
+    np.random.seed(seed)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FutureWarning)
+            return call(*args, random_state=np.random.RandomState(seed), **kwargs)
+    finally:
+        np.random.set_state(saved)
 
 
 def summarise(scores: dict[str, list[float]], reps: int = DEFAULT_REPS, seed: int = 0) -> list[Summary]:
@@ -218,8 +227,8 @@ def summarise(scores: dict[str, list[float]], reps: int = DEFAULT_REPS, seed: in
     summaries = []
     for name, values in scores.items():
         matrix = _column(values)
-        points, intervals = _quiet(library.get_interval_estimates, {name: matrix}, aggregates, reps=reps,
-                                   confidence_interval_size=CONFIDENCE, random_state=np.random.RandomState(seed))
+        points, intervals = _seeded(seed, library.get_interval_estimates, {name: matrix}, aggregates, reps=reps,
+                                   confidence_interval_size=CONFIDENCE)
         (iqm, mean), ((iqm_low, mean_low), (iqm_high, mean_high)) = points[name], intervals[name]
         summaries.append(Summary(name, len(matrix), float(iqm), float(iqm_low), float(iqm_high), float(mean),
                                  float(mean_low), float(mean_high), float(np.median(matrix))))
@@ -236,9 +245,9 @@ def improvements(scores: dict[str, list[float]], reps: int = DEFAULT_REPS, seed:
             if x == y:
                 continue
             pair = [_column(x_scores), _column(y_scores)]
-            points, intervals = _quiet(library.get_interval_estimates, {"pair": pair},
+            points, intervals = _seeded(seed, library.get_interval_estimates, {"pair": pair},
                                        metrics.probability_of_improvement, reps=reps,
-                                       confidence_interval_size=CONFIDENCE, random_state=np.random.RandomState(seed))
+                                       confidence_interval_size=CONFIDENCE)
             low, high = np.ravel(intervals["pair"])
             found.append(Improvement(x, y, float(points["pair"]), float(low), float(high)))
     return found
@@ -262,8 +271,8 @@ def profiles(scores: dict[str, list[float]], taus: np.ndarray, reps: int = DEFAU
         return np.array([np.mean(matrix > tau) for tau in taus])
     found = {}
     for name, values in scores.items():
-        points, intervals = _quiet(library.get_interval_estimates, {name: _column(values)}, profile, reps=reps,
-                                   confidence_interval_size=CONFIDENCE, random_state=np.random.RandomState(seed))
+        points, intervals = _seeded(seed, library.get_interval_estimates, {name: _column(values)}, profile, reps=reps,
+                                   confidence_interval_size=CONFIDENCE)
         found[name] = (points[name], intervals[name][0], intervals[name][1])
     return found
 
