@@ -151,7 +151,7 @@ def test_refusals(tmp_path):
 def script(*argv: str, code: str = "") -> subprocess.CompletedProcess:
     prelude = f"import sys, runpy; {code}sys.argv = ['report_runs.py', *{list(argv)!r}]; " \
               "runpy.run_path('report_runs.py', run_name='__main__')"
-    return subprocess.run([sys.executable, "-c", prelude], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    return subprocess.run([sys.executable, "-c", prelude], check=False, cwd=ROOT, capture_output=True, text=True, timeout=300)
 
 
 def test_command_line(tmp_path):
@@ -166,5 +166,5 @@ def test_command_line(tmp_path):
     missing = script("--group", static, code="sys.modules['rliable'] = None; ")
     assert missing.returncode == 2
     assert missing.stderr.strip().splitlines() == [
-        "report_runs.py: error: the statistics need rliable, which is not installed; install it with: "
-        "pip install -r requirements-stats.txt"]
+        ("report_runs.py: error: the statistics need rliable, which is not installed; install it with: "
+         "pip install -r requirements-stats.txt")]
