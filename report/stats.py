@@ -268,7 +268,7 @@ def profiles(scores: dict[str, list[float]], taus: np.ndarray, reps: int = DEFAU
     from rliable import library
 
     def profile(matrix: np.ndarray) -> np.ndarray:
-        return np.array([np.mean(matrix > tau) for tau in taus])
+        return (matrix[..., None] > taus).mean(axis=(0, 1))
     found = {}
     for name, values in scores.items():
         points, intervals = _seeded(seed, library.get_interval_estimates, {name: _column(values)}, profile, reps=reps,

@@ -168,3 +168,29 @@ def test_command_line(tmp_path):
     assert missing.stderr.strip().splitlines() == [
         ("report_runs.py: error: the statistics need rliable, which is not installed; install it with: "
          "pip install -r requirements-stats.txt")]
+
+
+def test_paper_report_static_against_hebbian(tmp_path):
+    """experiments/paper.py ant report: each seed's newest evaluated run, one report per evaluation body."""
+    bodies = ["AntBulletEnv-v0", "AntAsymRightBulletEnv-v0", "AntAsymLeftBulletEnv-v0"]
+    returns = {"static": [[100.0, 110.0], [90.0, 95.0], [10.0, 30.0]],
+               "hebbian": [[60.0, 70.0], [50.0, 55.0], [40.0, 44.0]]}
+    for kind, per_body in returns.items():
+        for seed in (1, 2, 3, 4):
+            run = make_run(tmp_path / f"ant_{kind}_seed{seed}", f"2026_run_seed{seed}", [0.0], env="AntBulletEnv-v0")
+            (run / "checkpoint.npz").write_bytes(b"")  # what marks a run folder for experiments/paper.py
+            files.write_json(run / "evaluation.json", {"environments": [
+                {"env_id": body, "returns": [value + seed for value in values]} for body, values in zip(bodies, per_body)]})
+    done = subprocess.run([sys.executable, "experiments/paper.py", "ant", "report", "--runs", str(tmp_path),
+                           "--reps", str(REPS)],
+                          check=False, cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    for body, (static, hebbian) in zip(bodies, zip(returns["static"], returns["hebbian"])):
+        with open(tmp_path / "ant_report" / body / "summary.csv", newline="") as handle:
+            rows = {row["group"]: row for row in csv.DictReader(handle)}
+        # seeds add 1..4 to both episodes: the IQM of four runs is the mean of the middle two (seeds 2, 3)
+        assert float(rows["static"]["iqm"]) == pytest.approx(sum(static) / 2 + 2.5)
+        assert float(rows["hebbian"]["iqm"]) == pytest.approx(sum(hebbian) / 2 + 2.5)
+    with open(tmp_path / "ant_report" / bodies[2] / "improvement.csv", newline="") as handle:
+        pairs = {(row["x"], row["y"]): float(row["probability"]) for row in csv.DictReader(handle)}
+    assert pairs["hebbian", "static"] == 1.0  # on the unseen body every Hebbian run beats every static one
