@@ -1,8 +1,8 @@
 """The commands the scripts print for the user to run next: resume a run, evaluate its parameters.
 
-A printed command must work when pasted into the same shell: it names the interpreter that is
-running (``sys.executable``, so it works outside an activated virtual environment too) and the
-script by a path that resolves from the current folder, and every word is shell-quoted (a
+A printed command must work when pasted into any shell, in any folder: it names the interpreter
+that is running (``sys.executable``, so it works outside an activated virtual environment too),
+the script and the run's files by absolute paths, and every word is shell-quoted (a
 ``--folder "my runs"`` stays one word).
 """
 
@@ -22,22 +22,14 @@ EVALUATE_FLAGS = {"weights": "--path_weights", "coeffs": "--path_hebb", "CNN_par
                   "coevolved_initial_weights": "--path_coev", "reservoir": "--path_reservoir"}
 
 
-def script_path(name: str) -> str:
-    """The project's script ``name``, relative to the current folder if it lies below it."""
-    path = ROOT / name
-    try:
-        return str(path.relative_to(Path.cwd()))
-    except ValueError:
-        return str(path)
-
-
 def command(script: str, *words: object) -> str:
-    return shlex.join([sys.executable or "python", script_path(script),
-                       *map(str, words)])
+    """The project's script ``script`` with ``words``, runnable from any folder (paths: absolute)."""
+    return shlex.join([sys.executable or "python", str(ROOT / script),
+                       *(str(word.absolute()) if isinstance(word, Path) else str(word) for word in words)])
 
 
 def resume_hint(config: TrainConfig, run_dir: Path) -> str:
-    return command(TRAIN_SCRIPTS[config.policy.kind], "--resume", run_dir)
+    return command(TRAIN_SCRIPTS[config.policy.kind], "--resume", Path(run_dir))
 
 
 def evaluate_hint(config: TrainConfig, paths: dict[str, Path]) -> str:
@@ -49,7 +41,7 @@ def evaluate_hint(config: TrainConfig, paths: dict[str, Path]) -> str:
         words += ["--network", config.policy.network]
     words += reservoir_words(config)
     for role, path in paths.items():
-        words += [EVALUATE_FLAGS[role], path]
+        words += [EVALUATE_FLAGS[role], Path(path)]
     return command(EVALUATE_SCRIPTS[config.policy.kind], *words, "--episodes", 10)
 
 

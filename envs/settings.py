@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
+
+NOT_PORTABLE = re.compile(r"[^A-Za-z0-9._+-]")  # POSIX portable file name characters, and '+'
 
 
 @dataclass(frozen=True)
@@ -18,6 +21,8 @@ class EnvSettings:
 
     @property
     def label(self) -> str:
-        """The environment part of the original file names: the ids as given, joined by '+',
-        without the ``module:`` part of custom ids (a colon is not portable in file names)."""
-        return "+".join(part.strip().rpartition(":")[2] for part in self.environment.split(",") if part.strip())
+        """The environment part of the original file names: the ids as given, joined by '+', without
+        the ``module:`` part of custom ids, and every character that is not portable in a file name
+        replaced by '-' (``ALE/Pong-v5`` -> ``ALE-Pong-v5``); other ids keep the original's names."""
+        ids = (part.strip().rpartition(":")[2] for part in self.environment.split(",") if part.strip())
+        return "+".join(NOT_PORTABLE.sub("-", env_id) for env_id in ids)

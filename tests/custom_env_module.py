@@ -45,3 +45,8 @@ class Corridor(gym.Env):
 
 if ENV_ID not in gym.registry:
     gym.register(id=ENV_ID, entry_point=Corridor, max_episode_steps=MAX_STEPS)
+
+# The same environment under a namespaced id, as Gymnasium's ``ALE/Pong-v5``: a '/' in the id
+NAMESPACED_ID = "Tests/Corridor-v0"
+if NAMESPACED_ID not in gym.registry:
+    gym.register(id=NAMESPACED_ID, entry_point=Corridor, max_episode_steps=MAX_STEPS)

@@ -76,8 +76,9 @@ class Training:
 
 
 def hint(script: str, *words) -> str:
-    """A command as the scripts print it: this interpreter, the script, shell-quoted words."""
-    return shlex.join([sys.executable, script, *map(str, words)])
+    """A command as the scripts print it: this interpreter, the script by its absolute path, shell-quoted
+    words."""
+    return shlex.join([sys.executable, str(ROOT / script), *map(str, words)])
 
 
 def _parent_and_state(pid: int) -> tuple[int, str] | None:

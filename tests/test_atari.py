@@ -32,6 +32,7 @@ import train_hebb
 import train_static
 from envs.atari import FireReset, looks_like_atari
 from es.files import load_dat
+from tests.extras import need
 
 ROOT = Path(__file__).resolve().parent.parent
 SHORT = "tests.atari_short:"
@@ -45,7 +46,10 @@ def run_in_process(main, *args) -> tuple[int, str]:
 
 
 def needs_ale():
-    return pytest.importorskip("ale_py")
+    need("atari")
+    import ale_py
+
+    return ale_py
 
 
 # --- ids and the missing extra ---------------------------------------------------------------------

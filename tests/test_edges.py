@@ -14,6 +14,7 @@ import io
 import json
 import os
 import re
+import shlex
 import signal
 import subprocess
 import sys
@@ -83,8 +84,8 @@ def test_printed_hints_run_when_pasted_outside_the_venv_in_a_folder_with_a_space
                             capture_output=True, text=True, timeout=120)  # the environment is repaired now
     assert pasted.returncode == 0, pasted.stderr
     evaluate = pasted.stdout.strip().splitlines()[-1].split("evaluate with: ", 1)[1]
-    assert "'my runs/" in evaluate
-    evaluated = subprocess.run(["/bin/sh", "-c", evaluate], cwd=place, env={**bare_shell(), "PYTHONPATH": str(ROOT)},
+    assert f"{place / 'my runs'}/" in shlex.split(evaluate)[5]  # the file by its absolute path, one word
+    evaluated = subprocess.run(["/bin/sh", "-c", evaluate], cwd=tmp_path, env={**bare_shell(), "PYTHONPATH": str(ROOT)},
                                capture_output=True, text=True, timeout=120)
     assert evaluated.returncode == 0, evaluated.stderr
     assert "FailingEnv-v0" in evaluated.stdout

@@ -35,6 +35,7 @@ from es.shaping import SHAPINGS
 from es.worker import make_tasks
 from policies import PolicySettings
 from report import plots, tensorboard
+from tests.extras import need
 from tests.run_helpers import assert_same_run, only_run
 
 CARTPOLE = ("--environment", "CartPole-v1", "--popsize", "8", "--seed", "7")
@@ -269,7 +270,7 @@ def test_hebbian_with_observation_normalisation_and_adam_across_a_resume(tmp_pat
 
 
 def test_ray_gives_the_serial_result_with_the_new_options(tmp_path):
-    pytest.importorskip("ray")
+    need("ray")
     argv = (*CARTPOLE, *OPTIONS["all"], "--generations", "2")
     serial = train(tmp_path / "serial", *argv, "--threads", "1")
     ray_run = train(tmp_path / "ray", *argv, "--threads", "2", "--backend", "ray")
@@ -418,7 +419,7 @@ def test_a_run_from_before_these_options_resumes(tmp_path):
 
 
 def test_tensorboard_holds_every_metrics_column(tmp_path):
-    pytest.importorskip("tensorboard")
+    need("tensorboard")
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
     run_dir = train(tmp_path, *CARTPOLE, "--generations", "2", "--threads", "1", "--tensorboard",

@@ -23,6 +23,7 @@ import pytest
 import train_hebb
 import train_static
 from es.files import load_dat
+from tests.extras import need
 
 CARTPOLE = ("--environment", "CartPole-v1", "--popsize", "8", "--generations", "2")
 RULES = ("A", "AD", "AD_lr", "ABC", "ABC_lr", "ABCD", "ABCD_lr", "ABCD_lr_D_out", "ABCD_lr_D_in_and_out")
@@ -125,6 +126,6 @@ def test_resumed_runs_give_the_pinned_parameters(case, tmp_path):
 
 @pytest.mark.parametrize("case", ["static CartPole", "hebbian several bodies"])
 def test_ray_gives_the_pinned_parameters(case, tmp_path):
-    pytest.importorskip("ray")
+    need("ray")
     (kind, argv), expected = CASES[case], PINNED[case]
     assert parameters_hash(train(kind, tmp_path, *argv, "--threads", "2", "--backend", "ray")) == expected

@@ -21,6 +21,7 @@ from es.backends import EvaluationError, Generation, SerialEvaluator
 from es.files import load_dat
 from es.noise import NoiseTable
 from es.worker import make_tasks
+from tests.extras import need
 from tests.ray_test_env import CrashingSpec
 
 CARTPOLE = ("--environment", "CartPole-v1", "--popsize", "16", "--seed", "7")
@@ -31,7 +32,9 @@ SIGMA = 0.1
 
 @pytest.fixture(scope="module")
 def ray_session():
-    ray = pytest.importorskip("ray", reason="Ray is optional; pip install -r requirements-ray.txt to test it")
+    need("ray")
+    import ray
+
     from es.backends.ray import start_ray
 
     started = start_ray(None, 2)

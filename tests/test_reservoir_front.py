@@ -16,9 +16,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy import sparse
 
-pytest.importorskip("reservoirpy", reason="the ER-MRL extra is optional: pip install -r requirements-reservoirs.txt")
+from tests.extras import need_module_level
+
+need_module_level("reservoirs")
+
+from scipy import sparse  # noqa: E402
 
 import evaluate_hebb  # noqa: E402
 import evaluate_static  # noqa: E402
@@ -265,14 +268,6 @@ def test_bad_training_input_is_one_line_and_creates_nothing(flags, message, tmp_
                        "1", "--folder", tmp_path / "runs")
     assert code == 2 and len(output.strip().splitlines()) == 1, output
     assert message in output
-    assert not (tmp_path / "runs").exists()
-
-
-def test_without_reservoirpy_reservoir_says_how_to_install_it(tmp_path, monkeypatch):
-    monkeypatch.setitem(sys.modules, "reservoirpy", None)  # import reservoirpy now raises ImportError
-    code, output = run(train_hebb.main, *RESERVOIR, "--generations", "1", "--folder", tmp_path / "runs")
-    assert code == 2 and len(output.strip().splitlines()) == 1, output
-    assert "reservoirpy, which is not installed here; pip install -r requirements-reservoirs.txt" in output
     assert not (tmp_path / "runs").exists()
 
 

@@ -27,6 +27,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.extras import need
+
 ROOT = Path(__file__).resolve().parent.parent
 ENV = {**os.environ, "SDL_VIDEODRIVER": "dummy", "MUJOCO_GL": "egl", "PYTHONUNBUFFERED": "1"}
 STEPS = "2048"
@@ -36,8 +38,7 @@ CARTPOLE_JOURNAL = "optuna-journal_CartPole-v1_t_2k_steps.log"
 
 
 def extra():
-    pytest.importorskip("optuna", reason="the ER-MRL extra is optional: pip install -r requirements-reservoirs.txt")
-    pytest.importorskip("stable_baselines3", reason="the ER-MRL extra is optional")
+    need("reservoirs")
     import optuna
 
     return optuna
@@ -148,6 +149,7 @@ def test_other_settings_cannot_join_a_study(evolved):
 
 
 def test_multi_reservoirs_evolve_and_test(tmp_path):
+    extra()
     common = ("--env_id", "Pendulum-v1", "--h_test", "m", "--nb_res", "2")
     code, out, err = run_in(tmp_path, "evolve_multi_res", *common, "--training_steps", STEPS, "--nb_trials", "1",
                             "--nb_seeds", "1", "--units", "10", "--skip_c", "True", "--sampler_seed", "0")
@@ -164,6 +166,7 @@ def test_multi_reservoirs_evolve_and_test(tmp_path):
 
 
 def test_generalization_evolves_on_two_tasks_and_tests_on_a_third(tmp_path):
+    extra()
     code, out, err = run_in(tmp_path, "evolve_generalization", "--env_type", "Ant_Swimmer", "--h_test", "g",
                             "--nb_res", "2", "--training_timesteps", STEPS, "--nb_trials", "1", "--nb_seeds", "1",
                             "--units", "10", "--sampler", "Random", "--fixed_iss", "True", "--sampler_seed", "0")
@@ -199,6 +202,7 @@ def test_trial_without_a_finished_episode_is_pruned(tmp_path):
 @pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_interrupted_study_keeps_its_trials(tmp_path, stop):
     """Ctrl-C, or a scheduler's SIGTERM, during a trial: it is marked failed in the journal, exit code 130."""
+    extra()
     process = run_script(tmp_path, "evolve_res", *CARTPOLE, "--nb_trials", "3", start_new_session=True)
     lines = []
     for line in process.stdout:
@@ -215,6 +219,7 @@ def test_interrupted_study_keeps_its_trials(tmp_path, stop):
 
 
 def test_two_processes_share_one_study(tmp_path):
+    extra()
     args = ("--env_id", "CartPole-v1", "--h_test", "shared", "--training_steps", STEPS, "--nb_seeds", "1",
             "--nb_trials", "1", "--sampler", "Random", "--units", "20")
     processes = [run_script(tmp_path, "evolve_res", *args) for _ in range(2)]
@@ -279,13 +284,16 @@ def test_bad_input_is_one_line_and_exit_2(case, tmp_path):
 
 
 def test_missing_extra_says_how_to_install_it(tmp_path):
-    hidden = tmp_path / "hide" / "optuna"
-    hidden.mkdir(parents=True)
-    (hidden / "__init__.py").write_text("raise ImportError('optuna hidden by the test')\n")
+    """Runs on every install: the extra's packages are hidden where they are installed."""
+    for module in ("reservoirpy", "stable_baselines3", "optuna", "cmaes"):
+        hidden = tmp_path / "hide" / module
+        hidden.mkdir(parents=True)
+        (hidden / "__init__.py").write_text(f"raise ImportError('{module} hidden by the test')\n")
     process = subprocess.run([sys.executable, str(ROOT / "scripts" / "evolve_res.py"), "--help"], cwd=tmp_path,
                              env={**ENV, "PYTHONPATH": str(tmp_path / "hide")}, capture_output=True, text=True,
                              timeout=120)
     assert process.returncode == 2 and process.stdout == "", process
     assert process.stderr.splitlines() == [
-        "evolve_res.py: error: the ER-MRL scripts need optuna, not installed here; "
+        "evolve_res.py: error: the ER-MRL scripts need reservoirpy, stable-baselines3, optuna, cmaes, not installed "
+        "here; "
         "pip install -r requirements-reservoirs.txt (or pip install -e .[reservoirs])"]

@@ -11,8 +11,9 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-pytest.importorskip("reservoirpy", reason="the ER-MRL extra is optional: pip install -r requirements-reservoirs.txt")
-pytest.importorskip("optuna", reason="the ER-MRL extra is optional: pip install -r requirements-reservoirs.txt")
+from tests.extras import need_module_level
+
+need_module_level("reservoirs")
 
 from reservoirs import experiments  # noqa: E402
 from reservoirs.esn import CONNECTIVITY, EchoStateNetwork, ReservoirMatrices, ReservoirSettings  # noqa: E402
