@@ -36,8 +36,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # the project's modules, when run as a script
 
-from cli.hints import EVALUATE_SCRIPTS, TRAIN_SCRIPTS
-from report.stats import DEFAULT_REPS
+from cli.hints import EVALUATE_SCRIPTS, TRAIN_SCRIPTS  # noqa: E402
+from report.stats import DEFAULT_REPS  # noqa: E402
 
 FILES = ROOT / "experiments" / "paper"
 EXPERIMENTS = sorted({path.stem.split("_")[0] for path in FILES.glob("*.toml")})
@@ -69,7 +69,8 @@ def latest_run(folder: Path) -> Path | None:
 
 
 def overrides(args: argparse.Namespace, *names: str) -> list[str]:
-    return [word for name in names if getattr(args, name) is not None for word in (f"--{name}", str(getattr(args, name)))]
+    return [word for name in names if getattr(args, name) is not None
+            for word in (f"--{name}", str(getattr(args, name)))]
 
 
 def train_command(args: argparse.Namespace, file: Path, folder: Path) -> list[str]:

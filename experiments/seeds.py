@@ -34,13 +34,13 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # the project's modules, when run as a script
 
-from cli import Parser, UserError
-from cli.flags import positive_int, seed_value
-from cli.hints import TRAIN_SCRIPTS
-from cli.train import given_flags
-from es import files
-from es.settings import RESUMABLE
-from experiments.paper import latest_run
+from cli import Parser, UserError  # noqa: E402
+from cli.flags import positive_int, seed_value  # noqa: E402
+from cli.hints import TRAIN_SCRIPTS  # noqa: E402
+from cli.train import given_flags  # noqa: E402
+from es import files  # noqa: E402
+from es.settings import RESUMABLE  # noqa: E402
+from experiments.paper import latest_run  # noqa: E402
 
 SET_BY_LAUNCHER = ("seed", "threads", "resume")
 RECORD = "launch.json"

@@ -308,8 +308,9 @@ def figure(summaries: list[Summary], curves: dict, taus: np.ndarray, pairs: list
     left, middle, right = figure.subplots(1, 3)
     for row, summary in enumerate(summaries):
         colour = f"C{row % 10}"
-        for offset, (point, low, high, marker) in enumerate(((summary.iqm, summary.iqm_low, summary.iqm_high, "o"),
-                                                              (summary.mean, summary.mean_low, summary.mean_high, "s"))):
+        estimates = ((summary.iqm, summary.iqm_low, summary.iqm_high, "o"),
+                     (summary.mean, summary.mean_low, summary.mean_high, "s"))
+        for offset, (point, low, high, marker) in enumerate(estimates):
             left.errorbar([point], [row + 0.15 - 0.3 * offset], xerr=[[point - low], [high - point]], fmt=marker,
                           color=colour, capsize=3, label=("IQM" if offset == 0 else "mean") if row == 0 else None)
         fraction, low, high = curves[summary.group]

@@ -19,6 +19,7 @@ EXTRAS = {
     "ray": ("ray",),
     "atari": ("ale_py",),
     "tensorboard": ("tensorboard",),
+    "stats": ("rliable", "arch", "pandas"),
 }
 
 

@@ -17,11 +17,16 @@ import pytest
 
 from es import files
 from report import stats
-
-pytest.importorskip("rliable", reason="the statistics extra: pip install -r requirements-stats.txt")
+from tests.extras import need
 
 ROOT = Path(__file__).resolve().parent.parent
 REPS = 300  # bootstrap replications: enough to test, few enough to be quick
+
+
+@pytest.fixture
+def rliable():
+    """The statistics extra; the test is skipped, naming it, where it is missing."""
+    need("stats")
 
 
 def metrics_row(generation: int, center: float, center_eval: float | str = "") -> dict:
@@ -37,8 +42,9 @@ def make_run(folder: Path, name: str, centres: list[float], env: str = "CartPole
     run = folder / name
     run.mkdir(parents=True)
     evaluations = evaluations or [""] * len(centres)
-    files.write_metrics(run / "metrics.csv", [metrics_row(number + 1, centre, evaluation) for number, (centre, evaluation)
-                                              in enumerate(zip(centres, evaluations))])
+    rows = [metrics_row(number + 1, centre, evaluation)
+            for number, (centre, evaluation) in enumerate(zip(centres, evaluations))]
+    files.write_metrics(run / "metrics.csv", rows)
     files.write_json(run / "config.json", {"env": {"env_ids": [env]}, "run": {"seed": 1}})
     if returns is not None:
         files.write_json(run / "evaluation.json", {"environments": [{"env_id": env, "returns": returns}]})
@@ -78,7 +84,7 @@ def test_scores_of_a_run(tmp_path):
         stats.evaluation_score(plain)
 
 
-def test_iqm_and_mean_exact_with_their_intervals(tmp_path):
+def test_iqm_and_mean_exact_with_their_intervals(tmp_path, rliable):
     finals = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 100.0]
     scores = {"a": finals}
     summary, = stats.summarise(scores, reps=REPS, seed=0)
@@ -94,7 +100,7 @@ def test_iqm_and_mean_exact_with_their_intervals(tmp_path):
     assert (other.iqm, other.mean) == (summary.iqm, summary.mean)
 
 
-def test_probability_of_improvement_exact(tmp_path):
+def test_probability_of_improvement_exact(tmp_path, rliable):
     x, y = [1.0, 2.0, 3.0, 4.0], [0.0, 1.0, 2.0, 3.0]
     pairs = {(pair.x, pair.y): pair for pair in stats.improvements({"x": x, "y": y}, reps=REPS, seed=0)}
     assert pairs["x", "y"].probability == pytest.approx(plain_improvement(x, y)) == pytest.approx(11.5 / 16)
@@ -104,7 +110,7 @@ def test_probability_of_improvement_exact(tmp_path):
     assert stats.improvements({"x": x, "y": y}, reps=REPS, seed=0) == list(pairs.values())
 
 
-def test_performance_profile_is_the_fraction_above(tmp_path):
+def test_performance_profile_is_the_fraction_above(tmp_path, rliable):
     scores = {"a": [1.0, 2.0, 3.0, 4.0], "b": [2.0, 2.0, 5.0, 6.0]}
     taus = np.array([0.0, 1.5, 2.0, 4.5, 6.0])
     curves = stats.profiles(scores, taus, reps=REPS, seed=0)
@@ -115,7 +121,7 @@ def test_performance_profile_is_the_fraction_above(tmp_path):
         assert np.all(low <= fraction + 1e-12) and np.all(fraction <= high + 1e-12)
 
 
-def test_report_files_from_run_folders(tmp_path):
+def test_report_files_from_run_folders(tmp_path, rliable):
     static = group_of(tmp_path, "static", [10.0, 20.0, 30.0, 40.0])
     hebbian = group_of(tmp_path, "hebbian", [15.0, 25.0, 35.0, 500.0])
     out = tmp_path / "out"
@@ -151,10 +157,11 @@ def test_refusals(tmp_path):
 def script(*argv: str, code: str = "") -> subprocess.CompletedProcess:
     prelude = f"import sys, runpy; {code}sys.argv = ['report_runs.py', *{list(argv)!r}]; " \
               "runpy.run_path('report_runs.py', run_name='__main__')"
-    return subprocess.run([sys.executable, "-c", prelude], check=False, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    return subprocess.run([sys.executable, "-c", prelude], check=False, cwd=ROOT, capture_output=True, text=True,
+                          timeout=300)
 
 
-def test_command_line(tmp_path):
+def test_command_line(tmp_path, rliable):
     static = group_of(tmp_path, "static", [1.0, 2.0, 3.0])
     other = group_of(tmp_path, "other", [2.0, 3.0, 4.0])
     done = script("--group", static, "--group", other, "--out", str(tmp_path / "out"), "--reps", "200")
@@ -162,15 +169,20 @@ def test_command_line(tmp_path):
     assert "| other | 3 | 3.0 [" in done.stdout
     bad = script("--group", f"x={tmp_path / 'missing'}", "--out", str(tmp_path / "out2"))
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "no run folder" in bad.stderr
-    # without rliable (an import that fails): one line naming the extra, exit 2
-    missing = script("--group", static, code="sys.modules['rliable'] = None; ")
+
+
+def test_without_rliable_one_line_names_the_extra(tmp_path):
+    """On every install: rliable hidden (its import fails) where it is present."""
+    static = group_of(tmp_path, "static", [1.0, 2.0, 3.0])
+    missing = script("--group", static, "--out", str(tmp_path / "out"), code="sys.modules['rliable'] = None; ")
     assert missing.returncode == 2
     assert missing.stderr.strip().splitlines() == [
         ("report_runs.py: error: the statistics need rliable, which is not installed; install it with: "
          "pip install -r requirements-stats.txt")]
+    assert not (tmp_path / "out").exists()
 
 
-def test_paper_report_static_against_hebbian(tmp_path):
+def test_paper_report_static_against_hebbian(tmp_path, rliable):
     """experiments/paper.py ant report: each seed's newest evaluated run, one report per evaluation body."""
     bodies = ["AntBulletEnv-v0", "AntAsymRightBulletEnv-v0", "AntAsymLeftBulletEnv-v0"]
     returns = {"static": [[100.0, 110.0], [90.0, 95.0], [10.0, 30.0]],
@@ -179,8 +191,9 @@ def test_paper_report_static_against_hebbian(tmp_path):
         for seed in (1, 2, 3, 4):
             run = make_run(tmp_path / f"ant_{kind}_seed{seed}", f"2026_run_seed{seed}", [0.0], env="AntBulletEnv-v0")
             (run / "checkpoint.npz").write_bytes(b"")  # what marks a run folder for experiments/paper.py
-            files.write_json(run / "evaluation.json", {"environments": [
-                {"env_id": body, "returns": [value + seed for value in values]} for body, values in zip(bodies, per_body)]})
+            evaluations = [{"env_id": body, "returns": [value + seed for value in values]}
+                           for body, values in zip(bodies, per_body)]
+            files.write_json(run / "evaluation.json", {"environments": evaluations})
     done = subprocess.run([sys.executable, "experiments/paper.py", "ant", "report", "--runs", str(tmp_path),
                            "--reps", str(REPS)],
                           check=False, cwd=ROOT, capture_output=True, text=True, timeout=600)
