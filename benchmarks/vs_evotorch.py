@@ -7,7 +7,8 @@
 
 Both tools evolve the same network, obs -> 128 -> 64 -> actions, no biases, tanh hidden layers, the
 output argmax-ed (Discrete) or clipped (Box) (policies/network.py; EvoTorch's GymNE with the same layer
-string), with the same population, in ONE process each (this tool with --threads 1, GymNE without Ray
+string), from the same initial centre (this tool's initialisation for the seed), with the same
+population, in ONE process each (this tool with --threads 1, GymNE without Ray
 actors), from the same seed. Every generation each tool also runs its centre once (this tool's loop
 does; for EvoTorch, ``GymNE.run`` on the centre, whose steps are added to its count) and a run is
 *solved* at the first generation whose centre return reaches --target (CartPole-v1: 475). A run
@@ -112,14 +113,28 @@ def our_settings(strategy: str, args: argparse.Namespace) -> ESSettings | None:
         return None
 
 
+def our_trainer(es: ESSettings, args: argparse.Namespace, seed: int, folder: str) -> Trainer:
+    spec = ProblemSpec((args.environment,))
+    return Trainer.start(es, RunSettings(generations=args.generations, threads=1, seed=seed), spec.build(),
+                         spec.build, spec.env_ids, RunFolder(Path(folder)), args.environment, log=lambda line: None)
+
+
+def initial_centre(args: argparse.Namespace, seed: int) -> np.ndarray:
+    """This tool's generation-0 centre for ``seed``: EvoTorch starts from it too. Both tools lay the
+    network's weights out as torch does, (out, in) per layer, in layer order, so it is the same network."""
+    with tempfile.TemporaryDirectory() as folder:
+        trainer = our_trainer(ESSettings(popsize=args.popsize), args, seed, folder)
+        try:
+            return trainer.state.theta.copy()
+        finally:
+            trainer.close()
+
+
 def run_ours(es: ESSettings, args: argparse.Namespace, seed: int) -> Result:
     """This tool's loop in this process (--threads 1), generation by generation, until solved."""
     result = Result("this tool", seed)
-    spec = ProblemSpec((args.environment,))
     with tempfile.TemporaryDirectory() as folder:
-        trainer = Trainer.start(es, RunSettings(generations=args.generations, threads=1, seed=seed), spec.build(),
-                                spec.build, spec.env_ids, RunFolder(Path(folder)), args.environment,
-                                log=lambda line: None)
+        trainer = our_trainer(es, args, seed, folder)
         try:
             for _ in range(args.generations):
                 started = time.perf_counter()
@@ -145,34 +160,35 @@ def centred_rank_std(popsize: int) -> float:
     return float(ranks.std())
 
 
-def openai_counterpart(problem, args):
+def openai_counterpart(problem, args, centre):
     from evotorch.algorithms import PGPE
 
     rate = args.lr / (args.sigma ** 2 * centred_rank_std(args.popsize))
     return PGPE(problem, popsize=args.popsize, center_learning_rate=rate, stdev_learning_rate=0.0,
-                stdev_init=args.sigma, optimizer=None, ranking_method="centered", symmetric=True)
+                stdev_init=args.sigma, optimizer=None, ranking_method="centered", symmetric=True,
+                center_init=centre)
 
 
-def pgpe_counterpart(problem, args):
+def pgpe_counterpart(problem, args, centre):
     from evotorch.algorithms import PGPE
 
     # ClipUp (Toklu et al. 2020): step size = max speed / 2; PGPE's sigma learning rate 0.1
     return PGPE(problem, popsize=args.popsize, center_learning_rate=0.075, stdev_learning_rate=0.1,
                 stdev_init=args.sigma, optimizer="clipup", optimizer_config={"max_speed": 0.15},
-                ranking_method="centered", symmetric=True)
+                ranking_method="centered", symmetric=True, center_init=centre)
 
 
-def snes_counterpart(problem, args):
+def snes_counterpart(problem, args, centre):
     from evotorch.algorithms import SNES
 
-    return SNES(problem, popsize=args.popsize, stdev_init=args.sigma)
+    return SNES(problem, popsize=args.popsize, stdev_init=args.sigma, center_init=centre)
 
 
 def cma_counterpart(separable: bool):
-    def make(problem, args):
+    def make(problem, args, centre):
         from evotorch.algorithms import CMAES
 
-        return CMAES(problem, popsize=args.popsize, stdev_init=args.sigma, separable=separable)
+        return CMAES(problem, popsize=args.popsize, stdev_init=args.sigma, separable=separable, center_init=centre)
     return make
 
 
@@ -194,7 +210,10 @@ def run_evotorch(strategy: str, args: argparse.Namespace, seed: int) -> Result:
     torch.set_num_threads(1)
     result = Result("EvoTorch", seed)
     problem = GymNE(env=args.environment, network=evotorch_network(), num_actors=None)
-    searcher = COUNTERPARTS[strategy](problem, args)
+    centre = initial_centre(args, seed)
+    if centre.size != problem.solution_length:
+        raise SystemExit(f"the networks differ: {centre.size} parameters here, {problem.solution_length} in EvoTorch")
+    searcher = COUNTERPARTS[strategy](problem, args, torch.from_numpy(centre))
     for _ in range(args.generations):
         started = time.perf_counter()
         before = problem.interaction_count
