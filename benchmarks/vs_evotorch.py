@@ -260,9 +260,9 @@ def compare(strategy: str, args: argparse.Namespace) -> None:
     print("|---|---|---|---|---|---|---|")
     for mine, other in zip(ours, theirs):
         for result in (mine, other):
+            solved = "-" if args.target is None else show(result.solved_at or float("inf"))
             print(f"| {result.seed} | {result.tool} | {result.generations} | {result.steps:,} | "
-                  f"{result.steps_per_second:,.0f} | {show(result.solved_at or float('inf'))} | "
-                  f"{result.final_centre:.1f} |")
+                  f"{result.steps_per_second:,.0f} | {solved} | {result.final_centre:.1f} |")
     ratios = [mine.steps_per_second / other.steps_per_second for mine, other in zip(ours, theirs)]
     print(f"steps per second, this tool / EvoTorch: median {statistics.median(ratios):.2f}x "
           f"(seeds: {min(ratios):.2f}x to {max(ratios):.2f}x; target >= 1.5x)")
@@ -271,6 +271,8 @@ def compare(strategy: str, args: argparse.Namespace) -> None:
               f"{show(median_solved(ours))}, EvoTorch {show(median_solved(theirs))}; solved "
               f"{sum(r.solved_at is not None for r in ours)}/{args.seeds} and "
               f"{sum(r.solved_at is not None for r in theirs)}/{args.seeds}")
+    print(f"final centre return, median: this tool {statistics.median(r.final_centre for r in ours):.1f}, "
+          f"EvoTorch {statistics.median(r.final_centre for r in theirs):.1f}")
 
 
 def main(argv: list[str] | None = None) -> int:
