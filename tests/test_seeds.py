@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 from es.files import read_json, read_metrics
+from tests.extras import need
 
 ROOT = Path(__file__).resolve().parent.parent
 TRAINING = ["train_static.py", "--environment", "CartPole-v1", "--popsize", "4"]
@@ -90,3 +91,14 @@ def test_dry_run_prints_one_command_per_seed_with_threads_sharing_the_cores(tmp_
     for seed, line in zip((7, 8, 9), lines):
         assert line.endswith(f"--seed {seed} --threads {cores} --folder {tmp_path / 'f' / f'seed{seed}'}")
     assert not (tmp_path / "f").exists()
+
+
+def test_seeds_as_ray_tasks(tmp_path):
+    need("ray")
+    folder = tmp_path / "ray"
+    done = launch("--seeds", "2", "--ray", "--", *TRAINING, "--generations", "1", "--folder", str(folder))
+    assert done.returncode == 0, done.stdout + done.stderr
+    for seed in (1, 2):
+        run = only_run(folder / f"seed{seed}")
+        assert read_json(run / "config.json")["run"]["seed"] == seed
+        assert len(read_metrics(run / "metrics.csv")) == 1
