@@ -24,8 +24,9 @@ from es.backends import BACKENDS
 from es.loop import NonFiniteUpdate, Status, Trainer
 from es.optimizers import OPTIMIZERS
 from es.runfolder import RunFolder, SaveError
-from es.settings import RESUMABLE, ESSettings, RunSettings
+from es.settings import RESUMABLE, STRATEGY_REQUIRES, ESSettings, RunSettings
 from es.shaping import SHAPINGS
+from es.strategies import PGPE_OPTIMIZERS, STRATEGIES
 from policies import PolicySettings
 from report import tensorboard
 from report.log import FitnessPlot, GenerationLog
@@ -65,6 +66,7 @@ def training_parser(prog: str, description: str, folder: str) -> Parser:
         help="with --backend ray: 'auto' joins the cluster `ray start` runs on this machine, HOST:PORT "
              "another one; default: start a local Ray with --threads CPUs")
     add_modern_options(parser)
+    add_strategy_options(parser)
     return parser
 
 
@@ -107,8 +109,45 @@ def add_modern_options(parser: Parser) -> None:
         help=f"also write every metrics column as TensorBoard scalars in <run>/tensorboard ({tensorboard.INSTALL_HINT})")
 
 
+def optional_float(text: str) -> float | None:
+    return None if text == "none" else float(text)
+
+
+def add_strategy_options(parser: Parser) -> None:
+    """The strategy (es.strategies) and the settings of each, with ESSettings' defaults; which flag
+    applies to which strategy is es.settings.STRATEGY_REQUIRES (refused otherwise, see NEEDS)."""
+    group = parser.add_argument_group("strategy (default: the original's OpenAI-ES)")
+    add = group.add_argument
+    add("--strategy", choices=list(STRATEGIES), default=ESSettings.strategy,
+        help="openai (Salimans et al. 2017, the original), pgpe (Sehnke et al. 2010, with ClipUp), snes (separable "
+             "NES), cma_es and sep_cma_es (the cmaes library: pip install -r requirements-strategies.txt), ars "
+             "(Mania et al. 2018; V2 with --obs_norm --obs_norm_prob 1); docs: es/strategies/")
+    add("--pgpe_optimizer", choices=list(PGPE_OPTIMIZERS), default=ESSettings.pgpe_optimizer,
+        help="pgpe: how the centre steps (ClipUp, Toklu et al. 2020; Adam; plain gradient ascent)")
+    add("--pgpe_lr", type=float, default=ESSettings.pgpe_lr, help="pgpe: the centre's step size; default "
+        "--clipup_max_speed / 2")
+    add("--clipup_max_speed", type=float, default=ESSettings.clipup_max_speed, help="pgpe: ClipUp's maximum speed")
+    add("--clipup_momentum", type=float, default=ESSettings.clipup_momentum, help="pgpe: ClipUp's momentum")
+    add("--pgpe_sigma_lr", type=float, default=ESSettings.pgpe_sigma_lr, help="pgpe: sigma's learning rate")
+    add("--pgpe_max_sigma_change", type=optional_float, default=ESSettings.pgpe_max_sigma_change, metavar="C",
+        help="pgpe: each sigma changes by at most this fraction per generation, in (0, 1]; none: no limit")
+    add("--snes_lr", type=float, default=ESSettings.snes_lr, help="snes: the centre's learning rate")
+    add("--snes_sigma_lr", type=float, default=ESSettings.snes_sigma_lr,
+        help="snes: sigma's learning rate; default (3 + ln d) / (5 sqrt d), d the parameters")
+    add("--ars_lr", type=float, default=ESSettings.ars_lr, help="ars: the step size alpha")
+    add("--ars_top", type=int, default=ESSettings.ars_top, metavar="B",
+        help="ars: the b best directions make the step (V1-t, V2-t); default all --popsize / 2")
+
+
+def required_values(values: dict) -> tuple[str, object]:
+    """NEEDS' entry for a STRATEGY_REQUIRES rule: the flags it needs and whether ``values`` has them."""
+    return (" ".join(f"--{name} {value}" for name, value in values.items()),
+            lambda given: all(given[name] == value for name, value in values.items()))
+
+
 # flag -> (what it needs, whether the values have it): given alone, the flag would silently do nothing
 NEEDS = {
+    **{name: required_values(values) for name, values in STRATEGY_REQUIRES.items()},
     "beta1": ("--optimizer adam", lambda values: values["optimizer"] == "adam"),
     "beta2": ("--optimizer adam", lambda values: values["optimizer"] == "adam"),
     "momentum": ("--optimizer momentum", lambda values: values["optimizer"] == "momentum"),

@@ -2,7 +2,8 @@
 kind or a script by name.
 
     loop.py        one generation, top to bottom: ask -> tasks -> evaluate -> fitness -> tell -> record
-    strategy.py    OpenAI-ES ask/tell (Salimans et al. 2017), shaping and optimiser injected
+    strategy.py    the ask/tell interface; OpenAI-ES (Salimans et al. 2017), shaping and optimiser injected
+    strategies/    the registry of strategies (--strategy): openai, pgpe, snes, cma_es, sep_cma_es, ars
     shaping.py     the fitness penalty and the fitness shapings (the original's, OpenAI's, none)
     optimizers.py  the step: the original's SGD, OpenAI's Adam and momentum, weight decay
     observations.py  --obs_norm's running observation statistics (OpenAI's RunningStat) and their files

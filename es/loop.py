@@ -1,7 +1,7 @@
 """The generation loop of a training run: ask -> tasks -> evaluate -> fitness -> tell -> record.
 
 All randomness of generation g comes from ``generation_rng(seed, g)`` (the members, their episode
-seeds, the centre's), from ``stream_rng(seed, RECORD_STREAM, g)`` (which mirrored pairs add their
+seeds, the centre's), from ``stream_rng(seed, RECORD_STREAM, g)`` (which mirrored pairs, or members, add their
 observations to the ``--obs_norm`` statistics) and ``stream_rng(seed, EVAL_STREAM, g)`` (the seeds of
 the centre's ``--eval_every`` episodes), and the noise table and theta_0 from the seed alone, so a
 run is a pure function of its settings: the same seed gives the same theta with any backend and
@@ -15,6 +15,11 @@ generations, as extra tasks of the same parallel generation, on seeds drawn from
 [2^31, 2^32), a range training seeds (< 2^31 - 1) never come from; their mean then picks best. The loop knows arrays, workers and files; the policy only through its protocol
 (``num_params``, ``initial_params``, ``penalised``, ``export``, ``file_name``), the environments
 not at all; what the user sees goes through the injected ``log``, display and reporters.
+
+The strategy is injected (``Trainer(..., strategy=...)``; by default the one ``--strategy`` names in
+``es.strategies.STRATEGIES``) and known only through its ask/tell (``es.strategy.Strategy``): its
+``Population`` says what the workers rebuild and whether members come in mirrored pairs, which then
+share their episode seeds (common random numbers); otherwise each member has seeds of its own.
 """
 
 from __future__ import annotations
@@ -35,7 +40,8 @@ from es.observations import RunningStat
 from es.runfolder import Checkpoint, History, RunFolder, SaveError
 from es.settings import ESSettings, RunSettings
 from es.shaping import penalised_fitness
-from es.strategy import OpenES
+from es.strategies import make_strategy
+from es.strategy import Population, Strategy
 from es.worker import TASK_DTYPE, make_tasks
 
 SEED_LIMIT = 2**31 - 1
@@ -96,11 +102,11 @@ class Reporter(Protocol):
 class Trainer:
     def __init__(self, es: ESSettings, run: RunSettings, policy, noise: NoiseTable, evaluator: Evaluator,
                  n_envs: int, folder: RunFolder, label: str, log: Callable[[str], None] = print,
-                 display=None, reporters: Sequence[Reporter] = ()):
+                 display=None, reporters: Sequence[Reporter] = (), strategy: Strategy | None = None):
         self.es, self.run, self.policy, self.noise, self.evaluator = es, run, policy, noise, evaluator
         self.n_envs, self.folder, self.label, self.log = n_envs, folder, label, log
         self.display, self.reporters = display, reporters
-        self.strategy = OpenES(es)
+        self.strategy = strategy if strategy is not None else make_strategy(es, policy.num_params)
         self.state = self.strategy.initial_state(policy.initial_params(np.random.default_rng([run.seed, 1])))
         self.history = History()
         self.failure: Exception | None = None  # what stopped the run, if something did
@@ -116,6 +122,8 @@ class Trainer:
         if es.noise_size < dim:  # noise_size, from an experiment file or config.json
             raise ValueError(f"--noise_size {es.noise_size} is smaller than the {dim} parameters; leave it out "
                              f"(the default sizes it) or give at least {dim}")
+        if options.get("strategy") is None:  # made before the workers start: it may refuse the run
+            options["strategy"] = make_strategy(es, dim)
         noise = NoiseTable.create(run.seed, es.noise_size, shared=not run.in_process)
         try:
             evaluator = make_evaluator(run, build_problem, noise, dim, env_ids, problem)
@@ -143,20 +151,21 @@ class Trainer:
         """One generation, top to bottom; its metrics row."""
         started, state, popsize = time.perf_counter(), self.state, self.es.popsize
         rng = generation_rng(self.run.seed, state.generation)
-        indices, signs = self.strategy.ask(rng, self.noise, self.policy.num_params)
-        pair_seeds = rng.integers(0, SEED_LIMIT, size=(popsize // 2, self.es.episodes))
+        population = self.strategy.ask(state, rng, self.noise)
+        repeat = 2 if population.mirrored else 1  # a mirrored pair shares its episode seeds
+        group_seeds = rng.integers(0, SEED_LIMIT, size=(popsize // repeat, self.es.episodes))
         center_seeds = rng.integers(0, SEED_LIMIT, size=(1, self.es.episodes))
-        tasks = make_tasks(np.arange(popsize + 1), np.append(indices, -1), np.append(signs, 0),
-                           np.concatenate([np.repeat(pair_seeds, 2, axis=0), center_seeds]), self.n_envs,
-                           self._recorded_pairs(state.generation, pair_seeds.shape), cap := self.history.episode_cap)
+        tasks = make_tasks(np.arange(popsize + 1), np.append(population.indices, -1), np.append(population.signs, 0),
+                           np.concatenate([np.repeat(group_seeds, repeat, axis=0), center_seeds]), self.n_envs,
+                           self._recorded(state.generation, group_seeds.shape, repeat),
+                           cap := self.history.episode_cap)
         training_tasks = len(tasks)
         tasks = np.concatenate([tasks, self._evaluation_tasks(state.generation)])
-        statistics = self.observations.published() if self.observations is not None else None
-        results = self._evaluate(Generation(state.generation, state.theta, state.sigma, tasks, statistics))
+        results = self._evaluate(self._published(state, population, tasks))
         returns = results.returns[:training_tasks].reshape(popsize + 1, -1).mean(axis=1)  # the centre is last
         penalties = results.penalties[:training_tasks].reshape(popsize + 1, -1)[:, 0]  # equal on a member's tasks
         fitness = penalised_fitness(returns[:popsize], penalties[:popsize], self.es.fitness_l2)
-        new_state, info = self.strategy.tell(state, self.noise, indices, fitness)
+        new_state, info = self.strategy.tell(state, self.noise, population, fitness)
         if not np.isfinite(new_state.theta).all():  # stop where it appears, keeping the last finite theta
             raise NonFiniteUpdate(f"generation {state.generation + 1}: the update is not finite (lr {state.lr:g}, "
                                   f"sigma {state.sigma:g}, update factor {info['update_factor']:g}); theta is kept as "
@@ -171,12 +180,20 @@ class Trainer:
         return self._record(fitness, returns[:popsize], center, info, int(results.steps.sum()), cap,
                             time.perf_counter() - started)
 
-    def _recorded_pairs(self, generation: int, shape: tuple[int, int]) -> np.ndarray | None:
-        """--obs_norm: which episodes of each mirrored pair (both members alike) add their observations."""
+    def _published(self, state, population: Population, tasks: np.ndarray) -> Generation:
+        """What the workers receive once this generation: theta, sigma, the observation statistics,
+        and the strategy's per-parameter sigma or members' vectors."""
+        statistics = self.observations.published() if self.observations is not None else None
+        return Generation(state.generation, state.theta, state.sigma, tasks, statistics, scale=population.scale,
+                          rows=population.rows)
+
+    def _recorded(self, generation: int, shape: tuple[int, int], repeat: int) -> np.ndarray | None:
+        """--obs_norm: which episodes of each mirrored pair (both members alike; ``repeat`` 2), or of
+        each member (``repeat`` 1), add their observations."""
         if self.observations is None:
             return None
         draws = stream_rng(self.run.seed, RECORD_STREAM, generation).random(shape) < self.es.obs_norm_prob
-        return np.concatenate([np.repeat(draws, 2, axis=0), np.zeros((1, shape[1]), dtype=bool)])
+        return np.concatenate([np.repeat(draws, repeat, axis=0), np.zeros((1, shape[1]), dtype=bool)])
 
     def _evaluation_tasks(self, generation: int) -> np.ndarray:
         """--eval_every generations: the centre on eval_episodes seeds of its own, on every environment."""
@@ -256,10 +273,20 @@ class Trainer:
         if checkpoint.theta.shape != (self.policy.num_params,):
             raise ValueError(f"{self.folder.path / 'checkpoint.npz'} holds {checkpoint.theta.size} parameters; "
                              f"this run needs {self.policy.num_params}")
-        self.state = checkpoint.state()
+        self.state = self._checked_strategy_state(checkpoint.state())
         self.history = checkpoint.history(self.folder.read_metrics(checkpoint.generation))
         if self.observations is not None:
             self.observations = RunningStat.from_arrays(checkpoint.observations) or self.observations
+
+    def _checked_strategy_state(self, state):
+        """The checkpoint's strategy arrays must be those this run's strategy keeps (names and shapes)."""
+        expected = {name: np.shape(array) for name, array in self.state.strategy.items()}
+        found = {name: np.shape(array) for name, array in state.strategy.items()}
+        if found != expected:
+            raise ValueError(f"{self.folder.path / 'checkpoint.npz'} holds the state of another strategy "
+                             f"({', '.join(sorted(found)) or 'none'}) than this run's --strategy {self.es.strategy} "
+                             f"({', '.join(sorted(expected)) or 'none'})")
+        return state
 
     def _stop(self, error: Exception) -> Status:
         """Report what stopped the run, and checkpoint it if that still works."""

@@ -6,7 +6,7 @@ the parameters, ``config.json``, ``metrics.csv`` and ``checkpoint.npz``; with ``
 ``<name>.obs_norm.npz`` of observation statistics beside each weight file (``es.observations``).
 Every write is atomic (``es.files``), and an OSError becomes a ``SaveError`` that names the file.
 The checkpoint is the fields of one dataclass, ``Checkpoint``, written and read by iterating over
-them; a field holding a dict of arrays (the optimiser's state, the observation statistics) is
+them; a field holding a dict of arrays (the optimiser's, the strategy's, the observation statistics) is
 stored as one array per key, ``<field>.<key>``, and is empty in checkpoints written before it existed.
 """
 
@@ -67,6 +67,7 @@ class Checkpoint:
     observations: dict[str, np.ndarray] = field(default_factory=dict)  # --obs_norm: RunningStat's sums
     best_observations: dict[str, np.ndarray] = field(default_factory=dict)  # those best_theta was evaluated with
     episode_cap: int = 0  # --variable_ep_len: the next generation's cap (0: none)
+    strategy: dict[str, np.ndarray] = field(default_factory=dict)  # the strategy's arrays (es.strategies)
 
     @classmethod
     def of(cls, state: ESState, history: History, observations: RunningStat | None = None) -> "Checkpoint":
@@ -77,10 +78,11 @@ class Checkpoint:
                    observations=observations.to_arrays() if observations is not None else {},
                    best_observations=(history.best_observations.to_arrays()
                                       if history.best_observations is not None else {}),
-                   episode_cap=history.episode_cap)
+                   episode_cap=history.episode_cap, strategy=state.strategy)
 
     def state(self) -> ESState:
-        return ESState(self.theta.astype(np.float32), self.lr, self.sigma, self.generation, dict(self.optimizer))
+        return ESState(self.theta.astype(np.float32), self.lr, self.sigma, self.generation, dict(self.optimizer),
+                       dict(self.strategy))
 
     def history(self, metrics: list[dict]) -> History:
         return History(best_theta=self.best_theta if self.best_theta.size else None, best_center=self.best_center,

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 from es.optimizers import OPTIMIZERS
 from es.shaping import SHAPINGS
+from es.strategies import PGPE_OPTIMIZERS, STRATEGIES
 
 
 def check_setting(name: str, value, valid: bool, expected: str) -> None:
@@ -74,6 +75,18 @@ class ESSettings:
     eval_every: int | None = None  # every this many generations the centre runs eval_episodes episodes
     eval_episodes: int = 10
     variable_ep_len: bool = False  # pytorch-es: cap each generation's episodes at twice the last one's mean length
+    # --- the strategy (es.strategies) and the settings of each; STRATEGY_REQUIRES says which applies to which
+    strategy: str = "openai"  # es.strategies.STRATEGIES; openai: the original's OpenAI-ES
+    pgpe_optimizer: str = "clipup"  # es.strategies.PGPE_OPTIMIZERS: how PGPE steps its centre
+    pgpe_lr: float | None = None  # PGPE's centre step size; None: clipup_max_speed / 2 (Toklu et al. 2020)
+    clipup_max_speed: float = 0.15  # ClipUp: the velocity's largest norm
+    clipup_momentum: float = 0.9  # ClipUp: the velocity's decay
+    pgpe_sigma_lr: float = 0.1  # PGPE: sigma += pgpe_sigma_lr * its gradient
+    pgpe_max_sigma_change: float | None = 0.2  # PGPE: each sigma changes by at most this fraction per generation
+    snes_lr: float = 1.0  # SNES: the centre's learning rate (the paper's 1)
+    snes_sigma_lr: float | None = None  # SNES: sigma's learning rate; None: the paper's (3 + ln d) / (5 sqrt d)
+    ars_lr: float = 0.02  # ARS: the step size alpha
+    ars_top: int | None = None  # ARS: the b best directions the step uses; None: all popsize / 2
 
     def __post_init__(self) -> None:
         """Every value checked, whether it came from a flag, an experiment file or a config.json."""
@@ -97,6 +110,24 @@ class ESSettings:
             check_whole("noise_size", self.noise_size, 1)
         check_choice("shaping", self.shaping, SHAPINGS)
         check_choice("optimizer", self.optimizer, OPTIMIZERS)
+        self._check_strategy_settings()
+
+    def _check_strategy_settings(self) -> None:
+        check_choice("strategy", self.strategy, STRATEGIES)
+        check_choice("pgpe_optimizer", self.pgpe_optimizer, PGPE_OPTIMIZERS)
+        for name in ("clipup_max_speed", "pgpe_sigma_lr", "snes_lr", "ars_lr"):
+            check_number(name, getattr(self, name), 0, low_open=True)
+        for name in ("pgpe_lr", "snes_sigma_lr"):
+            if getattr(self, name) is not None:
+                check_number(name, getattr(self, name), 0, low_open=True)
+        check_setting("clipup_momentum", self.clipup_momentum,
+                      is_number(self.clipup_momentum) and 0 <= self.clipup_momentum < 1, "in [0, 1)")
+        if self.pgpe_max_sigma_change is not None:
+            check_number("pgpe_max_sigma_change", self.pgpe_max_sigma_change, 0, 1, low_open=True)
+        if self.ars_top is not None:
+            directions = self.popsize // 2
+            check_setting("ars_top", self.ars_top, is_whole(self.ars_top) and 1 <= self.ars_top <= directions,
+                          f"a whole number from 1 to {directions} (the directions: --popsize / 2)")
 
     def evaluates_centre(self, generation: int) -> bool:
         """Whether the centre runs its evaluation episodes in generation ``generation`` (0-based):
@@ -134,5 +165,16 @@ class RunSettings:
         """Everything in this process: ``--threads 1``, or a one-core machine's pool."""
         return self.threads == 1 or (self.backend == "process" and self.workers == 1)
 
+
+# setting -> the values of other settings it has an effect with; given otherwise, the scripts refuse it
+STRATEGY_REQUIRES: dict[str, dict[str, str]] = {
+    **{name: {"strategy": "openai"} for name in ("lr", "decay", "lr_floor", "sigma_decay", "sigma_floor", "shaping",
+                                                 "optimizer", "l2coeff")},
+    **{name: {"strategy": "pgpe"} for name in ("pgpe_optimizer", "pgpe_lr", "clipup_max_speed", "pgpe_sigma_lr",
+                                               "pgpe_max_sigma_change")},
+    "clipup_momentum": {"strategy": "pgpe", "pgpe_optimizer": "clipup"},
+    **{name: {"strategy": "snes"} for name in ("snes_lr", "snes_sigma_lr")},
+    **{name: {"strategy": "ars"} for name in ("ars_lr", "ars_top")},
+}
 
 RESUMABLE = ("generations", "threads", "backend", "ray_address", "print_every", "tensorboard")  # what a resume may change

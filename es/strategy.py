@@ -1,4 +1,15 @@
-"""The evolution strategy of the original code: OpenAI-ES with mirrored sampling, ask/tell.
+"""The ask/tell interface every strategy shares, and the strategy of the original code: OpenAI-ES.
+
+The interface (``Strategy``, in the style of evosax): ``initial_state(theta)``; ``ask(state, rng,
+noise)`` returns the generation's ``Population`` -- a noise index and a sign per member (the wire
+protocol of DESIGN.md), and what the workers need beside theta: a per-parameter sigma (``scale``)
+or, for a strategy that cannot draw from the noise table, the members' vectors (``rows``), both
+published once per generation as theta is; ``tell(state, noise, population, fitness)`` returns the
+new ``ESState`` and a dict of metrics (``update_factor``, ``skipped``). A strategy's own arrays live
+in ``ESState.strategy`` and the optimiser's in ``ESState.optimizer``, both saved in the checkpoint.
+The registry of strategies is ``es.strategies.STRATEGIES``.
+
+OpenAI-ES with mirrored sampling:
 
 Salimans et al. 2017 ("Evolution Strategies as a Scalable Alternative to Reinforcement Learning"),
 Algorithm 2, as adapted by Najarro & Risi 2020 (upstream spec §2.1):
@@ -21,22 +32,64 @@ returns the new state and a dict of metrics.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
 from es.noise import NoiseTable
 from es.optimizers import Optimizer, OptimizerState, make_optimizer
-from es.settings import ESSettings
 from es.shaping import SHAPINGS, Shaping
+
+if TYPE_CHECKING:
+    from es.settings import ESSettings
 
 
 @dataclass(frozen=True)
 class ESState:
-    theta: np.ndarray  # float32
-    lr: float
-    sigma: float
+    theta: np.ndarray  # float32: the centre, what the run saves and evaluates
+    lr: float  # the step size (the metrics' lr column)
+    sigma: float  # the search's scale (the metrics' sigma column; the mean of a per-parameter sigma)
     generation: int = 0  # generations done
     optimizer: OptimizerState = field(default_factory=dict)
+    strategy: dict[str, np.ndarray] = field(default_factory=dict)  # the strategy's own arrays (PGPE's sigma, ...)
+
+
+@dataclass(frozen=True)
+class Population:
+    """One generation's members as the workers rebuild them: member m is
+    ``theta + signs[m] * sigma * noise[indices[m] : indices[m] + dim]``, with ``scale`` (a float32
+    per-parameter sigma) in place of sigma where given, or ``rows[indices[m]]`` where rows are given."""
+
+    indices: np.ndarray  # int64: noise index (or row of ``rows``) of each member
+    signs: np.ndarray  # int8: +1 or -1
+    mirrored: bool = True  # members 2p and 2p+1 are a mirrored pair: they share their episode seeds
+    scale: np.ndarray | None = None  # float32 (dim,): per-parameter sigma, published with theta
+    rows: np.ndarray | None = None  # float32 (members, dim): the members themselves, published with theta
+
+
+class Strategy(Protocol):
+    population_size: int
+
+    def initial_state(self, theta: np.ndarray) -> ESState:
+        """The state before the first generation, centred on ``theta``."""
+
+    def ask(self, state: ESState, rng: np.random.Generator, noise: NoiseTable) -> Population:
+        """The generation's members; every random draw comes from ``rng``."""
+
+    def tell(self, state: ESState, noise: NoiseTable, population: Population,
+             fitness: np.ndarray) -> tuple[ESState, dict]:
+        """The next state from each member's fitness (member order, higher is better), and metrics."""
+
+
+def mirrored_population(rng: np.random.Generator, noise: NoiseTable, dim: int, pairs: int) -> Population:
+    """``pairs`` noise slices, each taken with + then - : [+e1, -e1, +e2, -e2, ...]."""
+    indices = noise.sample_indices(rng, dim, pairs)
+    return Population(np.repeat(indices, 2), np.tile(np.array([1, -1], dtype=np.int8), pairs))
+
+
+def check_fitness(fitness: np.ndarray, population_size: int) -> None:
+    if fitness.shape != (population_size,):
+        raise ValueError(f"expected {population_size} fitness values, got shape {fitness.shape}")
 
 
 def decay_lr(lr: float, settings: ESSettings) -> float:
@@ -73,21 +126,19 @@ class OpenES:
     def initial_state(self, theta: np.ndarray) -> ESState:
         return ESState(np.asarray(theta, dtype=np.float32), self.settings.lr, self.settings.sigma)
 
-    def ask(self, rng: np.random.Generator, noise: NoiseTable, dim: int) -> tuple[np.ndarray, np.ndarray]:
+    def ask(self, state: ESState, rng: np.random.Generator, noise: NoiseTable) -> Population:
         """Noise index and sign of every member, in member order [+e1, -e1, +e2, -e2, ...]."""
-        indices = noise.sample_indices(rng, dim, self.pairs)
-        return np.repeat(indices, 2), np.tile(np.array([1, -1], dtype=np.int8), self.pairs)
+        return mirrored_population(rng, noise, state.theta.size, self.pairs)
 
-    def tell(self, state: ESState, noise: NoiseTable, indices: np.ndarray,
+    def tell(self, state: ESState, noise: NoiseTable, population: Population,
              fitness: np.ndarray) -> tuple[ESState, dict]:
         """One step from the fitness of each member (member order, higher is better)."""
-        if fitness.shape != (self.population_size,):
-            raise ValueError(f"expected {self.population_size} fitness values, got shape {fitness.shape}")
+        check_fitness(fitness, self.population_size)
         shaped = self.shaping(fitness)
         normaliser = self.population_size * state.sigma
         theta, optimizer_state = state.theta, state.optimizer
         if shaped is not None:
-            weighted_sum = self.weighted_noise(shaped, indices, noise, theta.size)
+            weighted_sum = self.weighted_noise(shaped, population.indices, noise, theta.size)
             with np.errstate(over="ignore", invalid="ignore"):  # a non-finite step is the caller's to refuse
                 theta, optimizer_state = self.optimizer.step(theta, weighted_sum, self.population_size, state.sigma,
                                                              state.lr, optimizer_state)

@@ -7,7 +7,12 @@ one record of ``TASK_DTYPE``
     (member, noise_index, sign, env_index, seed, record_obs)
 
 and its outcome ``("result", (return, env steps, L2 penalty, observation sums))`` or
-``("error", message)``. ``noise_index < 0`` is the unperturbed centre, theta itself. The L2 penalty
+``("error", message)``. ``noise_index < 0`` is the unperturbed centre, theta itself; otherwise the
+member is theta + sign * sigma * noise[noise_index : noise_index + dim]. Two strategies need more,
+published once per generation beside theta through the same path (``es.backends``: shared memory,
+Ray's object store), never per task: a per-parameter sigma (``scale``: PGPE, SNES), which replaces
+the scalar sigma, and the members' own vectors (``rows``: CMA-ES, whose samples cannot come from
+the noise table), where a member is ``rows[noise_index]``. The L2 penalty
 of the original's fitness, mean(theta_m^2) over the policy's penalised part, is computed here, where
 the member's parameters already exist, so that the runner never rebuilds a perturbed vector. The
 observation sums (sum, sum of squares, count; ``es.observations``) are those of the observations
@@ -64,8 +69,11 @@ def pin_threads() -> None:
         os.environ[variable] = "1"
 
 
-def perturb(theta: np.ndarray, epsilon: np.ndarray, sign: int, sigma: float) -> np.ndarray:
-    """A member's parameters, theta + sign * sigma * epsilon, in float32."""
+def perturb(theta: np.ndarray, epsilon: np.ndarray, sign: int, sigma: float | np.ndarray) -> np.ndarray:
+    """A member's parameters, theta + sign * sigma * epsilon, in float32; ``sigma`` a number or a
+    float32 vector (a per-parameter sigma)."""
+    if isinstance(sigma, np.ndarray):
+        return theta + (np.float32(sign) * sigma) * epsilon
     return theta + np.float32(sign * sigma) * epsilon
 
 
@@ -81,6 +89,8 @@ class Worker:
         self.problem = build_problem()
         self.noise = noise
         self.theta = theta  # read-only here; the runner writes it between generations
+        self.scale: np.ndarray | None = None  # a per-parameter sigma, when the generation publishes one
+        self.rows: np.ndarray | None = None  # the members' vectors, when the generation publishes them
         self._cached: tuple | None = None
         self._params: np.ndarray | None = None
         self._penalty = 0.0
@@ -90,9 +100,11 @@ class Worker:
         if self._cached != key:
             if noise_index < 0:
                 self._params = np.array(self.theta, dtype=np.float32)
+            elif self.rows is not None:
+                self._params = np.array(self.rows[noise_index], dtype=np.float32)
             else:
                 epsilon = self.noise.slice(noise_index, self.theta.size)
-                self._params = perturb(self.theta, epsilon, sign, sigma)
+                self._params = perturb(self.theta, epsilon, sign, sigma if self.scale is None else self.scale)
             self._penalty = l2_penalty(self._params[self.problem.policy.penalised])
             self._cached = key
         return self._params

@@ -19,6 +19,7 @@ EXTRAS = {
     "ray": ("ray",),
     "atari": ("ale_py",),
     "tensorboard": ("tensorboard",),
+    "strategies": ("cmaes",),
     "stats": ("rliable", "arch", "pandas"),
 }
 

@@ -15,7 +15,7 @@ from es.noise import NoiseTable
 from es.settings import ESSettings
 from es.shaping import centered_ranks, l2_penalty, penalised_fitness, standardise
 from es.shaping import rank_std as shape_fitness
-from es.strategy import ESState, OpenES
+from es.strategy import ESState, OpenES, Population
 from es.strategy import decay_lr as decay_lr_with
 from es.strategy import decay_sigma as decay_sigma_with
 
@@ -130,6 +130,11 @@ def test_schedules_stop_at_the_first_value_below_the_floor():
 # --- one step of OpenAI-ES -----------------------------------------------------------------------
 
 
+def pairs(indices):
+    """Mirrored members on these noise indices."""
+    return Population(np.array(indices), np.tile(np.array([1, -1], dtype=np.int8), len(indices) // 2))
+
+
 def tiny_table():
     # eps_1 = table[0:2], eps_2 = table[2:4]
     return NoiseTable(np.array([1.0, -2.0, 0.5, 3.0], dtype=np.float32))
@@ -138,7 +143,8 @@ def tiny_table():
 def test_ask_returns_mirrored_members_in_order():
     strategy = open_es(6)
     table = NoiseTable(np.arange(100, dtype=np.float32))
-    indices, signs = strategy.ask(np.random.default_rng(3), table, dim=10)
+    population = strategy.ask(ESState(np.zeros(10, np.float32), 0.2, 0.1), np.random.default_rng(3), table)
+    indices, signs = population.indices, population.signs
     assert indices.shape == signs.shape == (6,)
     np.testing.assert_array_equal(indices[0::2], indices[1::2])
     np.testing.assert_array_equal(signs, [1, -1, 1, -1, 1, -1])
@@ -158,7 +164,7 @@ def test_one_tell_step_matches_the_formula_written_by_hand():
     step = 0.2 / (4 * 0.1) * sum(f * e for f, e in zip(shaped, members))
     expected = theta.astype(np.float64) + step
 
-    new_state, metrics = strategy.tell(state, table, np.array([0, 0, 2, 2]), fitness)
+    new_state, metrics = strategy.tell(state, table, pairs([0, 0, 2, 2]), fitness)
 
     assert new_state.theta.dtype == np.float32
     np.testing.assert_allclose(new_state.theta, expected, rtol=1e-6)
@@ -177,7 +183,7 @@ def test_mirrored_pair_with_equal_fitness_contributes_nothing():
     theta = np.zeros(2, dtype=np.float32)
     state = ESState(theta=theta, lr=0.2, sigma=0.1)
     # Pair 1 tied (5, 5); pair 2 (1, 9): -e2 is better, so theta moves along -e2 only.
-    new_state, _ = strategy.tell(state, table, np.array([0, 0, 2, 2]), np.array([5.0, 5.0, 1.0, 9.0]))
+    new_state, _ = strategy.tell(state, table, pairs([0, 0, 2, 2]), np.array([5.0, 5.0, 1.0, 9.0]))
     ranks = np.array([1.5, 1.5, 0.0, 3.0]) / 3 - 0.5
     shaped = (ranks - ranks.mean()) / ranks.std()
     assert shaped[0] == shaped[1]
@@ -191,9 +197,9 @@ def test_update_factor_is_0_01_at_the_defaults():
     strategy = open_es(200)
     table = NoiseTable.create(seed=0, size=1000)
     state = ESState(theta=np.zeros(5, dtype=np.float32), lr=0.2, sigma=0.1)
-    indices, _ = strategy.ask(np.random.default_rng(0), table, dim=5)
+    population = strategy.ask(state, np.random.default_rng(0), table)
     fitness = np.random.default_rng(1).normal(size=200)
-    _, metrics = strategy.tell(state, table, indices, fitness)
+    _, metrics = strategy.tell(state, table, population, fitness)
     assert metrics["update_factor"] == pytest.approx(0.01, rel=1e-12)
 
 
@@ -201,7 +207,7 @@ def test_all_equal_fitness_skips_the_step_but_decays_the_schedules():
     strategy = open_es(4)
     theta = np.array([0.25, -1.0], dtype=np.float32)
     state = ESState(theta=theta, lr=0.2, sigma=0.1, generation=7)
-    new_state, metrics = strategy.tell(state, tiny_table(), np.array([0, 0, 2, 2]), np.full(4, 3.0))
+    new_state, metrics = strategy.tell(state, tiny_table(), pairs([0, 0, 2, 2]), np.full(4, 3.0))
     np.testing.assert_array_equal(new_state.theta, theta)
     assert np.all(np.isfinite(new_state.theta))
     assert metrics["skipped"] is True
@@ -218,7 +224,7 @@ def test_tell_rejects_the_wrong_number_of_fitness_values():
     strategy = open_es(4)
     state = ESState(theta=np.zeros(2, dtype=np.float32), lr=0.2, sigma=0.1)
     with pytest.raises(ValueError, match="expected 4 fitness values"):
-        strategy.tell(state, tiny_table(), np.array([0, 0, 2, 2]), np.ones(6))
+        strategy.tell(state, tiny_table(), pairs([0, 0, 2, 2]), np.ones(6))
 
 
 # --- noise table ---------------------------------------------------------------------------------

@@ -33,14 +33,23 @@ Progress = Callable[[int, int], None]  # (episodes just finished, their env step
 
 @dataclass(frozen=True)
 class Generation:
-    """One generation's work: theta, sigma and the observation statistics are published once, the
-    tasks say what to run."""
+    """One generation's work: theta, sigma, the observation statistics and a strategy's extra arrays
+    are published once, the tasks say what to run."""
 
     number: int  # generations done before this one
     theta: np.ndarray  # float32
     sigma: float
     tasks: np.ndarray  # es.worker.TASK_DTYPE
     statistics: Statistics | None = None  # --obs_norm: (mean, std) the policies normalise with
+    scale: np.ndarray | None = None  # float32 (dim,): a per-parameter sigma, in place of sigma (PGPE, SNES)
+    rows: np.ndarray | None = None  # float32 (members, dim): the members themselves (CMA-ES)
+
+    def extras(self) -> dict[str, np.ndarray]:
+        """The strategy's arrays this generation publishes beside theta, by ``es.worker.Worker``
+        attribute name, as contiguous float32."""
+        arrays = {"scale": self.scale, "rows": self.rows}
+        return {name: np.ascontiguousarray(array, dtype=np.float32) for name, array in arrays.items()
+                if array is not None}
 
 
 @dataclass

@@ -1,8 +1,12 @@
 """The process-pool backend: persistent worker processes on this machine.
 
 Each worker builds its environments once, maps the shared noise table and a shared theta, and
-receives only task records, in chunks (``es.backends.base``). A worker that dies (segfault, out of
-memory) is replaced and the task it was running is retried once.
+receives only task records, in chunks (``es.backends.base``). A strategy's per-generation arrays
+(a per-parameter sigma, CMA-ES's population matrix: ``Generation.extras``) are written once per
+generation into shared segments of their own (``SharedArrays``), made when first needed and remade
+only if an array outgrows its segment; a message names the segments, and a worker maps a segment
+once, by name. A worker that dies (segfault, out of memory) is replaced and the task it was running
+is retried once.
 """
 
 from __future__ import annotations
@@ -47,6 +51,7 @@ def _worker_main(conn, build_problem, noise_name: str, noise_size: int, theta_na
         conn.send(("fatal", f"{type(error).__name__}: {error}"))
         return
     conn.send(("ready", None))
+    mapped = MappedArrays()
     while True:
         try:
             message = conn.recv()
@@ -54,11 +59,63 @@ def _worker_main(conn, build_problem, noise_name: str, noise_size: int, theta_na
             break
         if message is None:
             break
-        generation, sigma, statistics, chunk = message
+        generation, sigma, statistics, extras, chunk = message
+        mapped.attach(worker, extras)
         for task in chunk:
             conn.send(worker.run(generation, sigma, task, statistics))
         conn.send(("done", None))
     worker.close()
+    mapped.close(worker)
+
+
+class SharedArrays:
+    """The runner's side: named float32 arrays in shared memory, rewritten every generation."""
+
+    def __init__(self):
+        self._segments: dict[str, shared_memory.SharedMemory] = {}
+
+    def publish(self, arrays: dict[str, np.ndarray]) -> dict[str, tuple[str, tuple[int, ...]]]:
+        """Write ``arrays``; what a worker needs to map them: name -> (segment, shape)."""
+        described = {}
+        for name, array in arrays.items():
+            segment = self._segments.get(name)
+            if segment is None or segment.size < array.nbytes:
+                self._free(name)
+                segment = self._segments[name] = shared_memory.SharedMemory(create=True, size=max(array.nbytes, 4))
+            np.ndarray(array.shape, dtype=np.float32, buffer=segment.buf)[...] = array
+            described[name] = (segment.name, array.shape)
+        return described
+
+    def _free(self, name: str) -> None:
+        segment = self._segments.pop(name, None)
+        if segment is not None:
+            segment.close()
+            segment.unlink()
+
+    def close(self) -> None:
+        for name in list(self._segments):
+            self._free(name)
+
+
+class MappedArrays:
+    """A worker's side: the segments of ``SharedArrays`` it has mapped, set on its ``Worker``."""
+
+    def __init__(self):
+        self._segments: dict[str, shared_memory.SharedMemory] = {}  # segment name -> mapping
+
+    def attach(self, worker: Worker, described: dict[str, tuple[str, tuple[int, ...]]]) -> None:
+        worker.scale = worker.rows = None  # no view may outlive its mapping
+        names = {segment for segment, _ in described.values()}
+        for segment in set(self._segments) - names:  # remade larger by the runner
+            self._segments.pop(segment).close()
+        for attribute, (segment, shape) in described.items():
+            if segment not in self._segments:
+                self._segments[segment] = attach_shared(segment)
+            buffer = self._segments[segment].buf
+            setattr(worker, attribute, np.ndarray(shape, dtype=np.float32, buffer=buffer))
+
+    def close(self, worker: Worker) -> None:
+        self.attach(worker, {})
 
 
 def _context():
@@ -84,6 +141,7 @@ class ProcessEvaluator:
         self._dim = dim
         self._theta_memory = shared_memory.SharedMemory(create=True, size=max(dim, 1) * 4)
         self._theta = np.ndarray((dim,), dtype=np.float32, buffer=self._theta_memory.buf)
+        self._extras = SharedArrays()
         pin_threads()  # here, before the workers (and the fork server) start and load their libraries
         self._context = _context()
         self._slots: list[_Slot] = []
@@ -118,6 +176,7 @@ class ProcessEvaluator:
 
     def evaluate(self, generation: Generation, progress: Progress | None = None) -> Results:
         self._theta[:] = generation.theta
+        extras = self._extras.publish(generation.extras())
         tasks = generation.tasks
         book = TaskBook(tasks, self.env_ids, progress)
         size = self._chunks.size(len(tasks))
@@ -127,7 +186,8 @@ class ProcessEvaluator:
             while idle and book.waiting:
                 slot = idle.pop()
                 slot.chunk = collections.deque(book.next_chunk(size))
-                slot.conn.send((generation.number, generation.sigma, generation.statistics, tasks[list(slot.chunk)]))
+                slot.conn.send((generation.number, generation.sigma, generation.statistics, extras,
+                                tasks[list(slot.chunk)]))
                 busy[slot.conn] = busy[slot.process.sentinel] = slot
             for ready in connection.wait(list(busy)):
                 slot = busy.get(ready)
@@ -184,6 +244,7 @@ class ProcessEvaluator:
                 slot.process.join()
             slot.conn.close()
         self._slots = []
+        self._extras.close()
         if self._theta_memory is not None:
             self._theta = np.empty(0, dtype=np.float32)
             self._theta_memory.close()

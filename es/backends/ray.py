@@ -9,7 +9,9 @@ DESIGN.md unchanged:
 - the noise table is put in the object store once per run; actors on the same node read it in
   place (zero-copy, read-only), actors on other nodes fetch it once;
 - theta is put once per generation and only its reference travels with each chunk (with the
-  observation statistics of ``--obs_norm``, two vectors of the observation's size);
+  observation statistics of ``--obs_norm``, two vectors of the observation's size), and so are a
+  strategy's per-generation arrays (``Generation.extras``: a per-parameter sigma, CMA-ES's
+  population matrix);
 - a chunk is task rows and their indices, and comes back as (task index, kind, payload) per task;
 - chunks hold about 0.1 s of work (``ChunkSizer``, shared with the process pool), are handed out
   as actors finish (``ray.wait``), and results are written back by task index, so the outcome is
@@ -139,10 +141,12 @@ class _WorkerActor:
         return self.failure
 
     def run(self, generation: int, sigma: float, theta: np.ndarray, statistics, indices: list[int],
-            rows: np.ndarray) -> list[tuple[int, str, object]]:
+            rows: np.ndarray, scale: np.ndarray | None = None,
+            members: np.ndarray | None = None) -> list[tuple[int, str, object]]:
         """Run a chunk; (task index, "result", (return, steps, penalty, observation sums)) or
-        (task index, "error", message)."""
-        self.worker.theta = theta  # Ray resolved the generation's reference: a read-only view
+        (task index, "error", message). ``scale`` and ``members``: the generation's extras."""
+        self.worker.theta = theta  # Ray resolved the generation's references: read-only views
+        self.worker.scale, self.worker.rows = scale, members
         return [(index, *self.worker.run(generation, sigma, row, statistics)) for index, row in zip(indices, rows)]
 
 
@@ -192,6 +196,8 @@ class RayEvaluator:
         tasks = generation.tasks
         book = TaskBook(tasks, self.env_ids, progress)
         theta_ref = ray.put(np.ascontiguousarray(generation.theta, dtype=np.float32))
+        extras = {name: ray.put(array) for name, array in generation.extras().items()}
+        scale_ref, members_ref = extras.get("scale"), extras.get("rows")  # top-level arguments: Ray resolves them
         size = self._chunks.size(len(tasks))
         suspects: set[int] = set()  # tasks of a chunk whose actor died: re-run one at a time
         idle = list(self._actors)
@@ -200,7 +206,7 @@ class RayEvaluator:
             while idle and book.waiting:
                 actor, indices = idle.pop(), book.next_chunk(size, alone=suspects)
                 reference = actor.run.remote(generation.number, generation.sigma, theta_ref, generation.statistics,
-                                             indices, tasks[indices])
+                                             indices, tasks[indices], scale_ref, members_ref)
                 in_flight[reference] = actor, indices
             done, _ = ray.wait([*in_flight, *self._starting], num_returns=1, timeout=WAIT_SECONDS)
             for ref in done:

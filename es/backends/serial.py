@@ -21,6 +21,8 @@ class SerialEvaluator:
 
     def evaluate(self, generation: Generation, progress: Progress | None = None) -> Results:
         self._theta[:] = generation.theta
+        extras = generation.extras()
+        self._worker.scale, self._worker.rows = extras.get("scale"), extras.get("rows")
         book = TaskBook(generation.tasks, self.env_ids, progress)
         while book.waiting:
             index = book.waiting.popleft()
