@@ -6,6 +6,7 @@
     python experiments/paper.py ant static            # ant: train on 2 bodies, evaluate on 3
     python experiments/paper.py ant hebbian
     python experiments/paper.py ant hebbian --popsize 8 --generations 2 --episodes 3   # a quick try
+    python experiments/paper.py ant report            # static against Hebbian over every seed run so far
 
 Each experiment is a data file, experiments/paper/<experiment>_<kind>.toml, that the training
 scripts read with --config (the same loader as a run's config.json); its [evaluation] section says
@@ -19,6 +20,12 @@ is complete it only evaluates. --dry-run prints the commands instead.
 Every value is checked before anything runs, --dry-run included, by the training script's own parser
 and checks (``check_training``); a folder whose run has other settings than the ones asked for
 (--seed, --popsize, ...) is refused, naming them, instead of being resumed with its own.
+
+``report`` compares the two kinds over the seeds run so far (the newest run of each folder
+runs/<experiment>_<kind>_seed<seed>, or under --runs) with rliable's statistics (report/stats.py:
+IQM and mean with 95 % bootstrap intervals, performance profiles, probability of improvement), scored
+by each run's evaluation.json, one report per evaluation environment (the ant: two seen bodies and
+the unseen one), in runs/<experiment>_report/<environment>/. It needs pip install -r requirements-stats.txt.
 """
 
 from __future__ import annotations
@@ -36,6 +43,7 @@ sys.path.insert(0, str(ROOT))  # the project's modules, when run as a script
 from cli.errors import USER_ERRORS, Parser, UserError, say  # noqa: E402
 from cli.flags import non_empty, positive_int, seed_value, threads_value  # noqa: E402
 from cli.hints import EVALUATE_SCRIPTS, TRAIN_SCRIPTS  # noqa: E402
+from report.stats import DEFAULT_REPS  # noqa: E402
 
 FILES = ROOT / "experiments" / "paper"
 EXPERIMENTS = sorted({path.stem.split("_")[0] for path in FILES.glob("*.toml")})
@@ -45,7 +53,8 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     parser = Parser(prog="paper.py", description=__doc__.splitlines()[0],
                     formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:]))
     parser.add_argument("experiment", choices=EXPERIMENTS)
-    parser.add_argument("kind", choices=tuple(TRAIN_SCRIPTS))
+    parser.add_argument("kind", choices=(*TRAIN_SCRIPTS, "report"),
+                        help="train and evaluate one kind, or report: compare the kinds over their seeds")
     parser.add_argument("--seed", type=seed_value, default=None, help="seed of the training run (default: the file's)")
     parser.add_argument("--popsize", type=positive_int, default=None, help="default: the file's")
     parser.add_argument("--generations", type=positive_int, default=None,
@@ -55,6 +64,9 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--threads", type=threads_value, default=None,
                         help="workers; -1 = all cores (default: the file's)")
     parser.add_argument("--folder", type=non_empty, default=None, help="default: runs/<experiment>_<kind>_seed<seed>")
+    parser.add_argument("--runs", type=Path, default=ROOT / "runs",
+                        help="with report: the folder holding the runs/<experiment>_<kind>_seed<seed> folders")
+    parser.add_argument("--reps", type=positive_int, default=DEFAULT_REPS, help="with report: bootstrap replications")
     parser.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
     return parser.parse_args(argv)
 
@@ -65,7 +77,8 @@ def latest_run(folder: Path) -> Path | None:
 
 
 def overrides(args: argparse.Namespace, *names: str) -> list[str]:
-    return [word for name in names if getattr(args, name) is not None for word in (f"--{name}", str(getattr(args, name)))]
+    return [word for name in names if getattr(args, name) is not None
+            for word in (f"--{name}", str(getattr(args, name)))]
 
 
 def train_command(args: argparse.Namespace, file: Path, folder: Path) -> list[str]:
@@ -126,8 +139,41 @@ def run(command: list[str], dry_run: bool) -> int:
     return 0 if dry_run else subprocess.run(command, cwd=ROOT).returncode
 
 
+
+def report(args: argparse.Namespace) -> int:
+    """Static against Hebbian: each seed's newest run, scored by its evaluation.json, per evaluation environment."""
+    from report import stats
+
+    if not stats.available():
+        print(f"paper.py: error: the report needs rliable, which is not installed; install it with: "
+              f"{stats.INSTALL_HINT}", file=sys.stderr)
+        return 2
+    with open(FILES / f"{args.experiment}_static.toml", "rb") as handle:
+        environments = tomllib.load(handle)["evaluation"]["environment"].split(",")
+    groups = []
+    for kind in TRAIN_SCRIPTS:
+        runs = [run for folder in sorted(args.runs.glob(f"{args.experiment}_{kind}_seed*"))
+                if (run := latest_run(folder)) is not None and (run / "evaluation.json").exists()]
+        if not runs:
+            print(f"paper.py: error: no evaluated {kind} run in {args.runs}/{args.experiment}_{kind}_seed*; run "
+                  f"python experiments/paper.py {args.experiment} {kind} --seed N first", file=sys.stderr)
+            return 2
+        groups.append(f"{kind}={','.join(map(str, runs))}")
+    for environment in environments:
+        out = args.runs / f"{args.experiment}_report" / environment
+        try:
+            result = stats.report(groups, out, "evaluation", environment, reps=args.reps)
+        except stats.StatsError as error:
+            print(f"paper.py: error: {error}", file=sys.stderr)
+            return 2
+        print(f"## {environment} (written to {out})\n\n{result.markdown}", flush=True)
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
+    if args.kind == "report":
+        return report(args)
     file = FILES / f"{args.experiment}_{args.kind}.toml"
     with open(file, "rb") as handle:
         experiment = tomllib.load(handle)

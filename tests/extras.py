@@ -20,6 +20,7 @@ EXTRAS = {
     "atari": ("ale_py",),
     "tensorboard": ("tensorboard",),
     "strategies": ("cmaes",),
+    "stats": ("rliable", "arch", "pandas"),
 }
 
 

@@ -1,0 +1,209 @@
+"""report/stats.py and report_runs.py on hand-made run folders, against the statistics computed plainly.
+
+The run folders are real: metrics.csv written by the project's own writer (es.files.write_metrics),
+config.json and evaluation.json as the scripts write them. rliable is the optional statistics extra.
+"""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from es import files
+from report import stats
+from tests.extras import need
+
+ROOT = Path(__file__).resolve().parent.parent
+REPS = 300  # bootstrap replications: enough to test, few enough to be quick
+
+
+@pytest.fixture
+def rliable():
+    """The statistics extra; the test is skipped, naming it, where it is missing."""
+    need("stats")
+
+
+def metrics_row(generation: int, center: float, center_eval: float | str = "") -> dict:
+    row = {name: 0 for name in files.METRICS_COLUMNS}
+    row.update(generation=generation, center_return=center, center_eval_mean=center_eval, center_eval_std="",
+               center_rank="", episode_cap="")
+    return row
+
+
+def make_run(folder: Path, name: str, centres: list[float], env: str = "CartPole-v1",
+             evaluations: list[float | str] | None = None, returns: list[float] | None = None) -> Path:
+    """A run folder as training leaves it: config.json and metrics.csv (and evaluation.json with ``returns``)."""
+    run = folder / name
+    run.mkdir(parents=True)
+    evaluations = evaluations or [""] * len(centres)
+    rows = [metrics_row(number + 1, centre, evaluation)
+            for number, (centre, evaluation) in enumerate(zip(centres, evaluations))]
+    files.write_metrics(run / "metrics.csv", rows)
+    files.write_json(run / "config.json", {"env": {"env_ids": [env]}, "run": {"seed": 1}})
+    if returns is not None:
+        files.write_json(run / "evaluation.json", {"environments": [{"env_id": env, "returns": returns}]})
+    return run
+
+
+def group_of(tmp_path: Path, name: str, finals: list[float]) -> str:
+    for number, final in enumerate(finals):
+        make_run(tmp_path / name, f"seed{number}", [0.0, final])
+    return f"{name}={tmp_path / name}"
+
+
+def plain_iqm(values: list[float]) -> float:
+    """The mean of the middle half: drop the lowest and highest quarter (a multiple of 4 runs here)."""
+    ordered = sorted(values)
+    quarter = len(ordered) // 4
+    middle = ordered[quarter:len(ordered) - quarter]
+    return sum(middle) / len(middle)
+
+
+def plain_improvement(x: list[float], y: list[float]) -> float:
+    """P(X > Y): the fraction of pairs where x wins, ties counting one half."""
+    wins = sum(1.0 if a > b else 0.5 if a == b else 0.0 for a, b in itertools.product(x, y))
+    return wins / (len(x) * len(y))
+
+
+def test_scores_of_a_run(tmp_path):
+    plain = make_run(tmp_path, "plain", [10.0, 40.0, 30.0])
+    assert stats.final_score(plain) == 30.0
+    assert stats.best_score(plain) == 40.0
+    # with --eval_every the centre's evaluation mean counts where it exists
+    evaluated = make_run(tmp_path, "evaluated", [10.0, 40.0, 30.0], evaluations=["", 35.5, 20.25])
+    assert stats.final_score(evaluated) == 20.25
+    assert stats.best_score(evaluated) == 35.5
+    assert stats.evaluation_score(make_run(tmp_path, "eval", [1.0], returns=[3.0, 4.0, 8.0])) == 5.0
+    with pytest.raises(stats.StatsError, match="no evaluation.json"):
+        stats.evaluation_score(plain)
+
+
+def test_iqm_and_mean_exact_with_their_intervals(tmp_path, rliable):
+    finals = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 100.0]
+    scores = {"a": finals}
+    summary, = stats.summarise(scores, reps=REPS, seed=0)
+    assert summary.iqm == pytest.approx(plain_iqm(finals), abs=1e-12) == 4.5
+    assert summary.mean == pytest.approx(sum(finals) / len(finals)) == 16.0
+    assert summary.median == 4.5
+    assert summary.iqm_low <= summary.iqm <= summary.iqm_high
+    assert summary.mean_low <= summary.mean <= summary.mean_high
+    assert summary.mean_high > summary.mean_low  # the outlier makes the mean's interval wide
+    again, = stats.summarise(scores, reps=REPS, seed=0)
+    assert again == summary  # deterministic for a fixed seed
+    other, = stats.summarise(scores, reps=REPS, seed=1)
+    assert (other.iqm, other.mean) == (summary.iqm, summary.mean)
+
+
+def test_probability_of_improvement_exact(tmp_path, rliable):
+    x, y = [1.0, 2.0, 3.0, 4.0], [0.0, 1.0, 2.0, 3.0]
+    pairs = {(pair.x, pair.y): pair for pair in stats.improvements({"x": x, "y": y}, reps=REPS, seed=0)}
+    assert pairs["x", "y"].probability == pytest.approx(plain_improvement(x, y)) == pytest.approx(11.5 / 16)
+    assert pairs["y", "x"].probability == pytest.approx(plain_improvement(y, x)) == pytest.approx(4.5 / 16)
+    for pair in pairs.values():
+        assert 0 <= pair.low <= pair.probability <= pair.high <= 1
+    assert stats.improvements({"x": x, "y": y}, reps=REPS, seed=0) == list(pairs.values())
+
+
+def test_performance_profile_is_the_fraction_above(tmp_path, rliable):
+    scores = {"a": [1.0, 2.0, 3.0, 4.0], "b": [2.0, 2.0, 5.0, 6.0]}
+    taus = np.array([0.0, 1.5, 2.0, 4.5, 6.0])
+    curves = stats.profiles(scores, taus, reps=REPS, seed=0)
+    for name, values in scores.items():
+        fraction, low, high = curves[name]
+        expected = [sum(value > tau for value in values) / len(values) for tau in taus]
+        np.testing.assert_allclose(fraction, expected)
+        assert np.all(low <= fraction + 1e-12) and np.all(fraction <= high + 1e-12)
+
+
+def test_report_files_from_run_folders(tmp_path, rliable):
+    static = group_of(tmp_path, "static", [10.0, 20.0, 30.0, 40.0])
+    hebbian = group_of(tmp_path, "hebbian", [15.0, 25.0, 35.0, 500.0])
+    out = tmp_path / "out"
+    result = stats.report([static, hebbian], out, reps=REPS, seed=3)
+    with open(out / "summary.csv", newline="") as handle:
+        rows = {row["group"]: row for row in csv.DictReader(handle)}
+    assert float(rows["static"]["iqm"]) == plain_iqm([10.0, 20.0, 30.0, 40.0]) == 25.0
+    assert float(rows["hebbian"]["mean"]) == 143.75
+    with open(out / "improvement.csv", newline="") as handle:
+        pairs = {(row["x"], row["y"]): float(row["probability"]) for row in csv.DictReader(handle)}
+    assert pairs["hebbian", "static"] == pytest.approx(plain_improvement([15, 25, 35, 500], [10, 20, 30, 40]))
+    assert "| static | 4 | 25.0 [" in (out / "summary.md").read_text()
+    assert (out / "report.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert len(result.scores["static"]) == 4
+    first = (out / "summary.csv").read_text()
+    stats.report([static, hebbian], out, reps=REPS, seed=3)
+    assert (out / "summary.csv").read_text() == first
+
+
+def test_refusals(tmp_path):
+    static = group_of(tmp_path, "static", [1.0, 2.0])
+    with pytest.raises(stats.StatsError, match="no run folder"):
+        stats.collect([f"empty={tmp_path / 'nothing'}"], "final")
+    with pytest.raises(stats.StatsError, match="NAME=RUN_FOLDERS"):
+        stats.collect(["static"], "final")
+    with pytest.raises(stats.StatsError, match="in both groups"):
+        stats.collect([static, static.replace("static=", "again=")], "final")
+    make_run(tmp_path / "cheetah", "seed1", [1.0], env="HalfCheetah-v5")
+    with pytest.raises(stats.StatsError, match="different environments"):
+        stats.collect([static, f"cheetah={tmp_path / 'cheetah'}"], "final")
+
+
+def script(*argv: str, code: str = "") -> subprocess.CompletedProcess:
+    prelude = f"import sys, runpy; {code}sys.argv = ['report_runs.py', *{list(argv)!r}]; " \
+              "runpy.run_path('report_runs.py', run_name='__main__')"
+    return subprocess.run([sys.executable, "-c", prelude], check=False, cwd=ROOT, capture_output=True, text=True,
+                          timeout=300)
+
+
+def test_command_line(tmp_path, rliable):
+    static = group_of(tmp_path, "static", [1.0, 2.0, 3.0])
+    other = group_of(tmp_path, "other", [2.0, 3.0, 4.0])
+    done = script("--group", static, "--group", other, "--out", str(tmp_path / "out"), "--reps", "200")
+    assert done.returncode == 0, done.stderr
+    assert "| other | 3 | 3.0 [" in done.stdout
+    bad = script("--group", f"x={tmp_path / 'missing'}", "--out", str(tmp_path / "out2"))
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "no run folder" in bad.stderr
+
+
+def test_without_rliable_one_line_names_the_extra(tmp_path):
+    """On every install: rliable hidden (its import fails) where it is present."""
+    static = group_of(tmp_path, "static", [1.0, 2.0, 3.0])
+    missing = script("--group", static, "--out", str(tmp_path / "out"), code="sys.modules['rliable'] = None; ")
+    assert missing.returncode == 2
+    assert missing.stderr.strip().splitlines() == [
+        ("report_runs.py: error: the statistics need rliable, which is not installed; install it with: "
+         "pip install -r requirements-stats.txt")]
+    assert not (tmp_path / "out").exists()
+
+
+def test_paper_report_static_against_hebbian(tmp_path, rliable):
+    """experiments/paper.py ant report: each seed's newest evaluated run, one report per evaluation body."""
+    bodies = ["AntBulletEnv-v0", "AntAsymRightBulletEnv-v0", "AntAsymLeftBulletEnv-v0"]
+    returns = {"static": [[100.0, 110.0], [90.0, 95.0], [10.0, 30.0]],
+               "hebbian": [[60.0, 70.0], [50.0, 55.0], [40.0, 44.0]]}
+    for kind, per_body in returns.items():
+        for seed in (1, 2, 3, 4):
+            run = make_run(tmp_path / f"ant_{kind}_seed{seed}", f"2026_run_seed{seed}", [0.0], env="AntBulletEnv-v0")
+            (run / "checkpoint.npz").write_bytes(b"")  # what marks a run folder for experiments/paper.py
+            evaluations = [{"env_id": body, "returns": [value + seed for value in values]}
+                           for body, values in zip(bodies, per_body)]
+            files.write_json(run / "evaluation.json", {"environments": evaluations})
+    done = subprocess.run([sys.executable, "experiments/paper.py", "ant", "report", "--runs", str(tmp_path),
+                           "--reps", str(REPS)],
+                          check=False, cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    for body, (static, hebbian) in zip(bodies, zip(returns["static"], returns["hebbian"])):
+        with open(tmp_path / "ant_report" / body / "summary.csv", newline="") as handle:
+            rows = {row["group"]: row for row in csv.DictReader(handle)}
+        # seeds add 1..4 to both episodes: the IQM of four runs is the mean of the middle two (seeds 2, 3)
+        assert float(rows["static"]["iqm"]) == pytest.approx(sum(static) / 2 + 2.5)
+        assert float(rows["hebbian"]["iqm"]) == pytest.approx(sum(hebbian) / 2 + 2.5)
+    with open(tmp_path / "ant_report" / bodies[2] / "improvement.csv", newline="") as handle:
+        pairs = {(row["x"], row["y"]): float(row["probability"]) for row in csv.DictReader(handle)}
+    assert pairs["hebbian", "static"] == 1.0  # on the unseen body every Hebbian run beats every static one
