@@ -28,12 +28,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-import envs  # noqa: E402  (headless defaults, pyBullet registration)
-from envs import ProblemSpec  # noqa: E402
-from es.backends import Generation, ProcessEvaluator  # noqa: E402
-from es.backends.ray import RayEvaluator  # noqa: E402
-from es.noise import NoiseTable, default_size  # noqa: E402
-from es.worker import make_tasks  # noqa: E402
+import envs
+from envs import ProblemSpec
+from es.backends import Generation, ProcessEvaluator
+from es.backends.ray import RayEvaluator
+from es.noise import NoiseTable, default_size
+from es.worker import make_tasks
 
 TARGET = 1.10
 

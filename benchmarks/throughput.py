@@ -41,13 +41,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-import envs  # noqa: E402  (headless defaults, pyBullet registration)
-import gymnasium as gym  # noqa: E402
-from envs import ProblemSpec, make_env, quiet_output  # noqa: E402
-from es.backends import Generation, ProcessEvaluator, SerialEvaluator  # noqa: E402
-from es.noise import NoiseTable  # noqa: E402
-from es.worker import make_tasks  # noqa: E402
-from policies import NETWORKS, PolicySettings, preprocessing  # noqa: E402
+import gymnasium as gym
+
+import envs
+from envs import ProblemSpec, make_env, quiet_output
+from es.backends import Generation, ProcessEvaluator, SerialEvaluator
+from es.noise import NoiseTable
+from es.worker import make_tasks
+from policies import NETWORKS, PolicySettings, preprocessing
 
 
 def generation_tasks(population: int, dim: int, noise: NoiseTable, rng: np.random.Generator) -> np.ndarray:

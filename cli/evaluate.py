@@ -87,7 +87,8 @@ def path_flags(args: argparse.Namespace) -> dict[str, str]:
 def check_outputs(args: argparse.Namespace, inputs: list[str]) -> None:
     """Refuse, before any episode runs, outputs that could not be written or that would replace an
     input (the weight files) or each other."""
-    from es.outputs import JSON_SUFFIXES, check_outputs as check_paths  # the guard of every output
+    from es.outputs import JSON_SUFFIXES  # the guard of every output
+    from es.outputs import check_outputs as check_paths
     from report.plots import FIGURE_SUFFIXES
     from report.video import VIDEO_SUFFIXES
 

@@ -17,14 +17,14 @@ import gymnasium as gym  # noqa: E402
 
 from envs.make import EnvironmentError_, make_env, quiet_output, register_fast_car_racing, resolve_env_id  # noqa: E402
 from envs.problem import Problem, ProblemSpec  # noqa: E402
-from envs.settings import EnvSettings  # noqa: E402
 from envs.recipes import Recipe, custom_recipe_modules, recipe_for, register_recipe  # noqa: E402
 from envs.rollout import Episode, episode_rng, rollout  # noqa: E402
+from envs.settings import EnvSettings  # noqa: E402
 
 gym.logger.min_level = 40  # errors only, as the original (gym.logger.set_level(40))
 with quiet_output():
     try:
-        import pybullet_envs_gymnasium  # noqa: E402,F401  (registers *BulletEnv-v0)
+        import pybullet_envs_gymnasium  # noqa: F401  (registers *BulletEnv-v0)
     except ImportError:  # pyBullet is optional for users who only need Gymnasium/MuJoCo
         pass
 

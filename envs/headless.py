@@ -107,5 +107,6 @@ def explain_gl_failure(error: Exception, environ=os.environ) -> RenderingUnavail
     if backend and any(("NoneType" in item and "gl" in item.lower()) or "OpenGL" in item or "GLFW" in item
                        or "PYOPENGL" in item for item in chain):
         return RenderingUnavailable(f"MUJOCO_GL={backend}: its library does not load here ({text}); without "
-                                    f"--video or --render nothing renders, so unset MUJOCO_GL; to render, {INSTALL_HINT}")
+                                    f"--video or --render nothing renders, so unset MUJOCO_GL; to render, "
+                                    f"{INSTALL_HINT}")
     return None

@@ -22,7 +22,6 @@ from envs import atari
 from envs.recipes import Recipe, recipe_for
 from envs.wrappers import MaxEpisodeSteps
 
-
 STOCK_CAR_RACING_ID = "CarRacingStock-v3"
 
 

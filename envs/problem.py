@@ -24,7 +24,7 @@ class ProblemSpec:
     recipe_modules: tuple[str, ...] = ()  # imported before the environments are made (custom recipes)
     max_episode_steps: int | None = None  # cap on an episode's policy steps (``envs.wrappers.MaxEpisodeSteps``)
 
-    def build(self, render_mode: str | None = None) -> "Problem":
+    def build(self, render_mode: str | None = None) -> Problem:
         return Problem(self, render_mode)
 
 

@@ -23,7 +23,7 @@ class Interrupts:
         self.requested = False
         self._previous: dict = {}
 
-    def __enter__(self) -> "Interrupts":
+    def __enter__(self) -> Interrupts:
         self._previous = {signum: signal.signal(signum, self._handle) for signum in self.SIGNALS}
         return self
 

@@ -12,7 +12,8 @@ Every generation the unperturbed centre runs one episode per member-episode on s
 unperturbed model", 1 + the members that returned more; 1 of N + 1 means no perturbation
 improved on it). With ``--eval_every G`` it also runs ``--eval_episodes K`` episodes every G
 generations, as extra tasks of the same parallel generation, on seeds drawn from
-[2^31, 2^32), a range training seeds (< 2^31 - 1) never come from; their mean then picks best. The loop knows arrays, workers and files; the policy only through its protocol
+[2^31, 2^32), a range training seeds (< 2^31 - 1) never come from; their mean then picks best. The
+loop knows arrays, workers and files; the policy only through its protocol
 (``num_params``, ``initial_params``, ``penalised``, ``export``, ``file_name``), the environments
 not at all; what the user sees goes through the injected ``log``, display and reporters.
 
@@ -28,8 +29,9 @@ import contextlib
 import enum
 import math
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, replace
-from typing import Callable, Protocol, Sequence
+from typing import Protocol
 
 import numpy as np
 
@@ -108,7 +110,7 @@ class Trainer:
 
     @classmethod
     def start(cls, es: ESSettings, run: RunSettings, problem, build_problem: Callable[[], object],
-              env_ids: tuple[str, ...], folder: RunFolder, label: str, **options) -> "Trainer":
+              env_ids: tuple[str, ...], folder: RunFolder, label: str, **options) -> Trainer:
         """Noise table and evaluator for ``problem`` (built here, reused by the serial backend)."""
         dim = problem.policy.num_params
         es = replace(es, noise_size=es.noise_size or default_size(dim))
@@ -192,7 +194,8 @@ class Trainer:
         """--eval_every generations: the centre on eval_episodes seeds of its own, on every environment."""
         if not self.es.evaluates_centre(generation):
             return np.zeros(0, dtype=TASK_DTYPE)
-        seeds = stream_rng(self.run.seed, EVAL_STREAM, generation).integers(*EVAL_SEEDS, size=(1, self.es.eval_episodes))
+        seeds = stream_rng(self.run.seed, EVAL_STREAM, generation).integers(*EVAL_SEEDS,
+                                                                            size=(1, self.es.eval_episodes))
         return make_tasks(np.array([self.es.popsize]), np.array([-1]), np.array([0]), seeds, self.n_envs)
 
     def _center(self, state, returns: np.ndarray, evaluation: np.ndarray) -> CenterReport:

@@ -37,7 +37,7 @@ class NoiseTable:
         self._owner = owner
 
     @classmethod
-    def create(cls, seed: int, size: int, shared: bool = False) -> "NoiseTable":
+    def create(cls, seed: int, size: int, shared: bool = False) -> NoiseTable:
         if not shared:
             array = np.empty(size, dtype=np.float32)
             np.random.default_rng(seed).standard_normal(size, dtype=np.float32, out=array)
@@ -52,7 +52,7 @@ class NoiseTable:
         return table
 
     @classmethod
-    def attach(cls, name: str, size: int) -> "NoiseTable":
+    def attach(cls, name: str, size: int) -> NoiseTable:
         memory = attach_shared(name)
         return cls(np.ndarray((size,), dtype=np.float32, buffer=memory.buf), memory)
 

@@ -22,9 +22,9 @@ Where the normalisation happens is ``policies.normalised``. Beside every weight 
 from __future__ import annotations
 
 import io
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable
 
 import numpy as np
 
@@ -42,10 +42,10 @@ class RunningStat:
     count: float
 
     @classmethod
-    def empty(cls, size: int) -> "RunningStat":
+    def empty(cls, size: int) -> RunningStat:
         return cls(np.zeros(size), np.full(size, EPS), EPS)
 
-    def merged(self, episodes: Iterable[ObservationSums | None]) -> "RunningStat":
+    def merged(self, episodes: Iterable[ObservationSums | None]) -> RunningStat:
         """These statistics plus each episode's sums, in the order given (None: did not record)."""
         total, squares, count = self.sum.copy(), self.sumsq.copy(), self.count
         for sums in episodes:
@@ -76,7 +76,7 @@ class RunningStat:
         return {"sum": self.sum, "sumsq": self.sumsq, "count": np.array(self.count)}
 
     @classmethod
-    def from_arrays(cls, arrays: dict[str, np.ndarray]) -> "RunningStat | None":
+    def from_arrays(cls, arrays: dict[str, np.ndarray]) -> RunningStat | None:
         if not arrays:
             return None
         return cls(np.asarray(arrays["sum"], np.float64), np.asarray(arrays["sumsq"], np.float64),

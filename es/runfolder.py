@@ -24,9 +24,9 @@ import os
 import shutil
 import time
 import typing
+from collections.abc import Callable
 from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -81,7 +81,7 @@ class Checkpoint:
     strategy: dict[str, np.ndarray] = field(default_factory=dict)  # the strategy's arrays (es.strategies)
 
     @classmethod
-    def of(cls, state: ESState, history: History, observations: RunningStat | None = None) -> "Checkpoint":
+    def of(cls, state: ESState, history: History, observations: RunningStat | None = None) -> Checkpoint:
         best = history.best_theta if history.best_theta is not None else np.zeros(0, np.float32)
         return cls(theta=state.theta, lr=state.lr, sigma=state.sigma, generation=state.generation,
                    best_theta=best, best_center=history.best_center, fitness_log=np.array(history.fitness_log),
@@ -114,7 +114,7 @@ class Checkpoint:
         return buffer.getvalue()
 
     @classmethod
-    def from_file(cls, path: Path) -> "Checkpoint":
+    def from_file(cls, path: Path) -> Checkpoint:
         types = typing.get_type_hints(cls)
         with np.load(path) as saved:  # a field added later is absent from older checkpoints: its default
             return cls(**{item.name: _decode(saved, item.name, types[item.name]) for item in fields(cls)
@@ -146,7 +146,7 @@ class RunFolder:
     made_parents: list[Path] = field(default_factory=list)  # the folders above it that creating it made
 
     @classmethod
-    def create(cls, folder: str | Path, label: str, seed: int) -> "RunFolder":
+    def create(cls, folder: str | Path, label: str, seed: int) -> RunFolder:
         """A fresh run folder ``<folder>/<time>_<env>_seed<seed>``; never an existing one."""
         folder = Path(folder)
         made = [parent for parent in (folder, *folder.parents) if not parent.exists()]
@@ -167,7 +167,7 @@ class RunFolder:
         raise RunFolderError(f"cannot create a new run folder in {folder}")
 
     @classmethod
-    def existing(cls, path: str | Path) -> "RunFolder":
+    def existing(cls, path: str | Path) -> RunFolder:
         path = Path(path)
         if not (path / "config.json").is_file() or not (path / "checkpoint.npz").is_file():
             raise RunFolderError(f"--resume {path}: not a run folder (needs config.json and checkpoint.npz)")

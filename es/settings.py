@@ -115,7 +115,8 @@ class ESSettings:
         check(self)
         directions = self.popsize // 2
         if self.ars_top is not None and self.ars_top > directions:
-            raise ValueError(f"--ars_top must be a whole number from 1 to {directions} (the directions: --popsize / 2), "
+            raise ValueError(f"--ars_top must be a whole number from 1 to {directions} (the directions: --popsize / 2)"
+                             ", "
                              f"got {self.ars_top}")
 
     def evaluates_centre(self, generation: int) -> bool:

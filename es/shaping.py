@@ -17,7 +17,7 @@ Each returns None when every member is equal: there is no direction to step in.
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

@@ -22,7 +22,7 @@ the policy acted on, for a task with ``record_obs`` set, and None otherwise.
 from __future__ import annotations
 
 import os
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

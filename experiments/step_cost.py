@@ -8,7 +8,8 @@ A real training run's first generations are no guide: random networks end their 
 (CarRacing after 21 steps without a new tile, the ant after step 201 + 31 steps without progress),
 while a trained one runs all 1000 steps. So this measures, per environment, the CPU time of one
 policy step (``policy.act`` + ``env.step`` through the recipe's wrappers, generation-0 parameters,
-in the project's one episode loop, ``envs.rollout``) and of one reset (the ant's 40-step burn-in included), in this process's CPU time so that other
+in the project's one episode loop, ``envs.rollout``) and of one reset (the ant's 40-step burn-in
+included), in this process's CPU time so that other
 load on the machine does not inflate it, and projects
 
     seconds per generation = (popsize + 1) x sum over envs (reset + length x step) / workers
@@ -29,7 +30,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from envs import ProblemSpec, episode_rng, resolve_env_id, rollout  # noqa: E402
+from envs import ProblemSpec, episode_rng, resolve_env_id, rollout
 from policies import PolicySettings
 
 

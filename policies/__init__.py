@@ -1,6 +1,7 @@
 """Policies: networks behind one protocol (``policies.base.Policy``, EvoJAX style) and a registry of
 kinds (``policies.registry``): static networks, whose weights are evolved (the original's, or
-pytorch-es's small net and conv-LSTM), and Hebbian networks, whose plasticity rules are. Policies know arrays, never environments.
+pytorch-es's small net and conv-LSTM), and Hebbian networks, whose plasticity rules are. Policies know
+arrays, never environments.
 """
 
 from policies.base import Policy

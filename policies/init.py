@@ -9,7 +9,7 @@ matrix; the Hebbian networks draw fresh weights from it at every episode.
 from __future__ import annotations
 
 import math
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

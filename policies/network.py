@@ -2,7 +2,8 @@
 
 State vectors go through an MLP  obs -> 128 -> 64 -> actions; pixels (C x 84 x 84: 3 for the
 original's RGB frames, 4 for an Atari frame stack) first through two conv layers whose 648 features
-feed the same head; the first conv layer takes the observation's C channels. No layer has a bias; hidden layers use tanh;
+feed the same head; the first conv layer takes the observation's C channels. No layer has a bias; hidden
+layers use tanh;
 the output is raw unless the environment's recipe asks for tanh (pyBullet).
 
 A ``Layout`` names the parts of a flat parameter vector, so that it can be split into weights,

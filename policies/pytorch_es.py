@@ -253,11 +253,13 @@ class ConvLSTMPolicy(WeightFile):
         lstm_weights = np.concatenate([view(params, "lstm.weight_ih"), view(params, "lstm.weight_hh")], axis=1)
         lstm_bias = view(params, "lstm.bias_ih") + view(params, "lstm.bias_hh")
         positions = [conv_output(height) * conv_output(width) for _, height, width in self.shapes]
-        columns = tuple(np.zeros((channels * 9, size) if channels * 9 < SHORT_PATCH else (size, channels * 9), np.float32)
+        columns = tuple(np.zeros((channels * 9, size) if channels * 9 < SHORT_PATCH else (size, channels * 9),
+                                 np.float32)
                         for (channels, _, _), size in zip(self.shapes, positions))
         features = tuple(np.zeros((CONV_CHANNELS, size), np.float32) for size in positions)
         exponentials = tuple(np.zeros_like(layer) for layer in features)
-        padded = tuple(np.zeros((channels, height + 2, width + 2), np.float32) for channels, height, width in self.shapes)
+        padded = tuple(np.zeros((channels, height + 2, width + 2), np.float32)
+                       for channels, height, width in self.shapes)
         return LSTMState(conv_weights, conv_biases, lstm_weights, lstm_bias,
                          (view(params, "actor_linear.weight"), view(params, "actor_linear.bias")), padded, columns,
                          features, exponentials,

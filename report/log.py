@@ -6,7 +6,7 @@ metrics row and each save, and the loop itself never prints.
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 from report.plots import save_run_plot
 

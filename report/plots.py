@@ -14,8 +14,8 @@ the picture is written atomically like every other file of a run, in the format 
 from __future__ import annotations
 
 import io
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 

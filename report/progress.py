@@ -15,7 +15,9 @@ import contextlib
 import shutil
 import sys
 import time
-from typing import ContextManager, Iterator, Protocol, TextIO
+from collections.abc import Iterator
+from contextlib import AbstractContextManager
+from typing import Protocol, TextIO
 
 from tqdm import tqdm
 
@@ -25,7 +27,7 @@ RECENT_GENERATIONS = 5  # the run ETA assumes the coming generations take as lon
 
 
 class Display(Protocol):
-    def generation(self, number: int, episodes: int, generations_after: int) -> ContextManager[Callback | None]:
+    def generation(self, number: int, episodes: int, generations_after: int) -> AbstractContextManager[Callback | None]:
         """Around generation ``number`` of ``episodes`` episodes: yields the evaluators' callback."""
 
 

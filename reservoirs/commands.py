@@ -109,7 +109,8 @@ def search_space(args: argparse.Namespace, nb_res: int, suffixed: bool) -> Searc
 def search_settings(args: argparse.Namespace, space: SearchSpace, **extra) -> dict:
     """What a study records, and what a later process must not change."""
     return {"units": args.units, "training_steps": args.training_steps, "nb_res": space.nb_res,
-            "skip_c": args.skip_c, "fixed_iss": args.fixed_iss, "zero_action": args.zero_action, "nb_seeds": args.nb_seeds, "ep_eval": args.ep_eval,
+            "skip_c": args.skip_c, "fixed_iss": args.fixed_iss, "zero_action": args.zero_action,
+            "nb_seeds": args.nb_seeds, "ep_eval": args.ep_eval,
             "bounds": {name: list(bounds) for name, bounds in space.bounds.items()}, **extra}
 
 
@@ -255,7 +256,8 @@ def add_test_flags(parser: Parser) -> None:
     add("--h_test", type=study_part, required=True, help="the --h_test of the evolution")
     add("--HP_training_steps", type=positive_int, default=300000, help="the --training_steps of the evolution")
     add_training_steps(parser, default=10000000, help="PPO training steps of each model")
-    add("--seed", type=seed_value, default=None, help=f"seed of the reservoirs and PPO (default: ${SLURM_SEED}, else 0)")
+    add("--seed", type=seed_value, default=None,
+        help=f"seed of the reservoirs and PPO (default: ${SLURM_SEED}, else 0)")
     add("--units", type=positive_int, default=None, help="neurons per reservoir (default: the study's, else 100)")
     add_bool(parser, "skip_c", None, "as in the evolution (default: the study's, else False)")
     add_bool(parser, "zero_action", None, "as in the evolution (default: the study's, else False)")

@@ -13,7 +13,8 @@ leaky integrator (0.3's "internal" equation, without noise)
 
 reservoirpy 0.4 rewrote the node API and changed the defaults (no bias, spectral radius 1, one random
 stream split three ways), so the matrices are made with 0.4's own ``mat_gen`` initialisers, called as
-0.3 called them (``policies.reservoir_matrices``), and handed to a 0.4 ``Reservoir``. With scipy 1.17 they are the matrices
+0.3 called them (``policies.reservoir_matrices``), and handed to a 0.4 ``Reservoir``. With scipy 1.17
+they are the matrices
 0.3.9.post1 makes, bit for bit, and so are the states (tests/test_reservoirs.py holds 0.3's output).
 
 The random draws themselves, ``ReservoirMatrices``, live in ``policies.reservoir_matrices``: the ES

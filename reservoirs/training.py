@@ -14,8 +14,8 @@ is the mean of the normalised scores (``reservoirs.experiments.normalised_score`
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import gymnasium as gym
 import numpy as np

@@ -17,7 +17,7 @@ Discrete space with ``zero_action``). Every reservoir is reset to zero at every 
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import gymnasium as gym
 import numpy as np

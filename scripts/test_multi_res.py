@@ -8,7 +8,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the repository root, for `reservoirs`
 
-from reservoirs.launch import run_script  # noqa: E402
+from reservoirs.launch import run_script
 
 if __name__ == "__main__":
     sys.exit(run_script("test_multi_res"))

@@ -27,7 +27,7 @@ class CrashingSpec:
     marker: str | None = None
     driver_pid: int = -1
 
-    def build(self) -> "CrashingProblem":
+    def build(self) -> CrashingProblem:
         return CrashingProblem(self)
 
 

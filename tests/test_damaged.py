@@ -19,8 +19,8 @@ import pytest
 
 import envs
 from envs import ProblemSpec, damaged, recipes
-from policies import PolicySettings
 from es.files import read_metrics
+from policies import PolicySettings
 
 FEET = ("front_left_foot", "right_back_foot")  # bodies of left_ankle_geom and fourth_ankle_geom
 SOURCES = {"bullet": (damaged.standard_bullet_xml, damaged.bullet_xml),

@@ -60,7 +60,8 @@ EXTRAS = {
     "ray": (("ray",), lambda script, args: "ray" in args or "ray_vs_process" in script),
     "atari": (("ale_py",), lambda script, args: any(re.search(r"ALE/|NoFrameskip|Deterministic-v|pong", word)
                                                      for word in args)),
-    "tensorboard": (("tensorboard",), lambda script, args: "--tensorboard" in args or script.startswith("scripts/test")),
+    "tensorboard": (("tensorboard",),
+                    lambda script, args: "--tensorboard" in args or script.startswith("scripts/test")),
 }
 # budgets: flag -> tiny value
 SHRINK = {"--generations": "1", "--popsize": "2", "--episodes": "1", "--eval_episodes": "1", "--eval_every": "1",
@@ -255,7 +256,7 @@ def run_script(argv: list[str], cwd: str, log: str) -> None:
         code = exit.code if isinstance(exit.code, int) else (0 if exit.code is None else 1)
         if not isinstance(exit.code, int | None):
             print(exit.code, file=sys.stderr)
-    except BaseException:  # noqa: BLE001 -- whatever the script raised ends its run, as it would in python
+    except BaseException:
         traceback.print_exc()
     finally:
         atexit._run_exitfuncs()  # what the interpreter does at exit (Ray's shutdown, pools)
@@ -324,7 +325,7 @@ class PageFolder:
 
     def run_folders(self) -> set[Path]:
         found = set()
-        for folder, subfolders, files in os.walk(self.path):  # links into the checkout are not followed
+        for folder, _, files in os.walk(self.path):  # links into the checkout are not followed
             if "config.json" in files and "checkpoint.npz" in files:
                 found.add(Path(folder))
         return found
@@ -479,7 +480,8 @@ def test_readme_begins_with_the_two_commands():
     """The first command installs the base requirements and trains; the second installs them and
     nothing else, then runs exactly the test command CI runs."""
     train, tests = [parts(command.words) for command in COMMANDS[:2]]
-    assert train[1][1:] == ["install", "-r", "requirements.txt"] and tests[1][1:] == ["install", "-r", "requirements.txt"]
+    assert train[1][1:] == ["install", "-r", "requirements.txt"]
+    assert tests[1][1:] == ["install", "-r", "requirements.txt"]
     assert Path(train[2][1]).name == "train_static.py"
     assert len(tests) == 3 and tests[2][1:] == ["-m", "pytest", "tests", "-q"]
 

@@ -278,7 +278,8 @@ def test_a_closed_pipe_does_not_stop_the_run(tmp_path):
 
 def test_ctrl_c_during_evaluation_prints_the_episodes_done(tmp_path):
     save_dat(tmp_path / "w.dat", np.zeros(4 * 128 + 128 * 64 + 64 * 2))
-    process = subprocess.Popen([sys.executable, "evaluate_static.py", "--environment", "tests.failing_env:FailingEnv-v0",
+    process = subprocess.Popen([sys.executable, "evaluate_static.py",
+                                "--environment", "tests.failing_env:FailingEnv-v0",
                                 "--path_weights", str(tmp_path / "w.dat"), "--episodes", "1000"], cwd=ROOT,
                                env={**os.environ, "FAILING_ENV_STEP": "5", "FAILING_ENV_HOW": "hang",
                                     "FAILING_ENV_AFTER": "1",  # the first episode ends, the second hangs
@@ -331,7 +332,8 @@ def test_a_bfloat16_tensor_loads_as_float32(tmp_path):
 def test_an_unknown_environment_names_a_shell_command_to_list_them():
     import envs
 
-    with pytest.raises(envs.EnvironmentError_, match=r"python -c 'import envs, gymnasium; gymnasium.pprint_registry\(\)'"):
+    listing = r"python -c 'import envs, gymnasium; gymnasium.pprint_registry\(\)'"
+    with pytest.raises(envs.EnvironmentError_, match=listing):
         envs.resolve_env_id("qqqqqqqqqqqqqqqqqq-v9")
 
 

@@ -21,8 +21,8 @@ import pytest
 
 from envs import ProblemSpec, rollout
 from envs.evaluation import evaluate, format_table, trace_episode
-from policies import PolicySettings
 from es.files import save_dat
+from policies import PolicySettings
 
 ROOT = Path(__file__).resolve().parent.parent
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -156,8 +156,10 @@ def test_unwritable_output_is_one_line_and_exit_2(tmp_path, capsys, flag):
 
 
 @pytest.mark.parametrize("extra, message", [
-    (["--json", "{folder}"], "--json {folder}: exists and is not a regular file (a folder or a device); give a file name"),
-    (["--render", "--video", "{folder}/v.mp4"], "--video records frames off screen; it cannot be combined with --render"),
+    (["--json", "{folder}"],
+     "--json {folder}: exists and is not a regular file (a folder or a device); give a file name"),
+    (["--render", "--video", "{folder}/v.mp4"],
+     "--video records frames off screen; it cannot be combined with --render"),
 ])
 def test_impossible_outputs_are_one_line_and_exit_2(tmp_path, capsys, extra, message):
     import evaluate_static

@@ -1,4 +1,5 @@
-"""Run files (es/files.py, es/runfolder.py, the policies' file names): the original ``.dat`` format and names, safe loading, atomic writes.
+"""Run files (es/files.py, es/runfolder.py, the policies' file names): the original ``.dat`` format and names,
+safe loading, atomic writes.
 
 A ``.dat`` file is a float32 numpy array saved with ``torch.save`` (upstream spec §6). The original
 files were written with numpy 1, whose pickles name ``numpy.core.multiarray._reconstruct``; they

@@ -309,7 +309,11 @@ def test_members_record_what_their_policy_acted_on_and_the_centre_never_does(tmp
                             RunFolder(tmp_path), "CartPole-v1", log=lambda line: None)
     seen = []
     evaluate = trainer.evaluator.evaluate
-    trainer.evaluator.evaluate = lambda generation, progress=None: seen.append(evaluate(generation, progress)) or seen[-1]
+    def recording(generation, progress=None):
+        seen.append(evaluate(generation, progress))
+        return seen[-1]
+
+    trainer.evaluator.evaluate = recording
     try:
         trainer.generation()
     finally:

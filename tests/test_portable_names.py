@@ -56,7 +56,8 @@ def test_a_namespaced_id_trains_and_evaluates_through_the_printed_hint_in_anothe
     (run,) = (data / "runs").iterdir()
     assert run.name.endswith("_Tests-Corridor-v0_seed3")
     assert all("/" not in name and ":" not in name for name in os.listdir(run))
-    assert any(name.startswith("Fitness_values_") and name.endswith("_Tests-Corridor-v0.npy") for name in os.listdir(run))
+    assert any(name.startswith("Fitness_values_") and name.endswith("_Tests-Corridor-v0.npy")
+               for name in os.listdir(run))
     evaluate = last_hint(trained.stdout, "evaluate with: ")
     assert shlex.split(evaluate)[1] == str(ROOT / script.replace("train", "evaluate"))
     evaluated = subprocess.run(["/bin/sh", "-c", evaluate], cwd=elsewhere, env=bare_shell(), capture_output=True,

@@ -260,7 +260,8 @@ def test_nes_utilities_tied_pair_cancels_and_equal_fitness_gives_no_step():
 def test_pytorch_es_experiment_files_hold_its_defaults(name, environment, network):
     from cli.config import TrainConfig
 
-    config = TrainConfig.from_toml(Path(__file__).resolve().parent.parent / "experiments" / "pytorch_es" / f"{name}.toml")
+    experiments = Path(__file__).resolve().parent.parent / "experiments"
+    config = TrainConfig.from_toml(experiments / "pytorch_es" / f"{name}.toml")
     assert (config.env.environment, config.policy.kind, config.policy.network) == (environment, "static", network)
     es = config.es
     assert (es.popsize, es.lr, es.decay, es.sigma, es.sigma_decay, es.fitness_l2) == (40, 0.1, 1.0, 0.05, 1.0, 0.0)

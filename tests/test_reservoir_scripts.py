@@ -158,7 +158,8 @@ def test_multi_reservoirs_evolve_and_test(tmp_path):
     assert code == 0, err
     study = load(tmp_path, "optuna-journal_Pendulum-v1_2_m_2k_steps.log", "Pendulum-v1_2_m_2k_steps")
     assert sorted(study.best_params) == ["iss_1", "iss_2", "lr_1", "lr_2", "sr_1", "sr_2"]
-    code, out, err = run_in(tmp_path, "test_multi_res", *common, "--HP_training_steps", STEPS, "--training_steps", STEPS)
+    code, out, err = run_in(tmp_path, "test_multi_res", *common, "--HP_training_steps", STEPS,
+                            "--training_steps", STEPS)
     assert code == 0, err
     summary = json.loads((tmp_path / "models" / "Pendulum-v1_m" / "test_2k_steps_seed_0.json").read_text())
     assert list(summary["models"]) == ["PPO", "RES_PPO_0.0003", "RES_PPO_0.0001", "RES_PPO_0.00005"]
@@ -269,7 +270,8 @@ def test_a_corrupt_journal_is_named_and_left_as_it_was(evolved, tmp_path):
     for corrupt in (b"".join(lines[:1] + [b"garbage{{\n"] + lines[1:]), b"".join(lines) + b"garbage{{\n"):
         copy = tmp_path / journal.name
         copy.write_bytes(corrupt)
-        for argv in (("evolve_res", *CARTPOLE, "--nb_trials", "1"), ("test", *CARTPOLE[:4], "--HP_training_steps", STEPS)):
+        for argv in (("evolve_res", *CARTPOLE, "--nb_trials", "1"),
+                     ("test", *CARTPOLE[:4], "--HP_training_steps", STEPS)):
             code, out, err = run_in(tmp_path, *argv)
             assert code == 2 and len(err.splitlines()) == 1 and f"the journal {journal.name} is corrupt" in err, err
             assert copy.read_bytes() == corrupt

@@ -1,7 +1,8 @@
 """The nine Hebbian rules (policies/rules.py) against the equations of upstream spec §4.1.
 
 Each rule's folded form (a o_j + b) o_i + c o_j + d, the factors the compiled Hebbian kernel reads
-(``Rule.fold``), is compared with a plain per-synapse loop that reads coefficient row ``offset + i * n_out + j`` (i pre-synaptic,
+(``Rule.fold``), is compared with a plain per-synapse loop that reads coefficient row
+``offset + i * n_out + j`` (i pre-synaptic,
 j post-synaptic) with the column meanings of the original kernels: 0 = A, 1 = B, 2 = C, 3 = eta
 (D in plain ABCD), 4 = D inside eta (D outside for _D_out), 5 = D outside eta.
 """

@@ -10,7 +10,7 @@ given seed gives the same theta on any of them, with any number of workers.
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 from es.backends.base import (
     EvaluationError,

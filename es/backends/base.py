@@ -18,8 +18,9 @@ from __future__ import annotations
 import collections
 import math
 import time
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import Callable, Iterable, Protocol
+from typing import Protocol
 
 import numpy as np
 
@@ -61,7 +62,7 @@ class Results:
     observations: list = field(default_factory=list)  # task order: the episode's observation sums, or None
 
     @classmethod
-    def empty(cls, n_tasks: int) -> "Results":
+    def empty(cls, n_tasks: int) -> Results:
         return cls(np.zeros(n_tasks), np.zeros(n_tasks, dtype=np.int64), np.zeros(n_tasks),
                    observations=[None] * n_tasks)
 

@@ -18,8 +18,8 @@ import os
 import signal
 import sys
 import time
+from collections.abc import Callable
 from multiprocessing import connection, shared_memory
-from typing import Callable
 
 import numpy as np
 

@@ -32,7 +32,7 @@ import os
 import re
 import signal
 import socket
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 import ray

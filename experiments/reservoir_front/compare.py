@@ -114,7 +114,8 @@ def train_command(args: argparse.Namespace, extra: list[str], arm: str, seed: in
 def evaluate_command(args: argparse.Namespace, arm: str, run_dir: Path) -> list[str]:
     """The run's last*.dat files; the evaluate scripts take the rule and the reservoir from its config.json."""
     kind = ARMS[arm][0]
-    command = [sys.executable, str(ROOT / EVALUATE_SCRIPTS[kind]), "--environment", args.evaluate_on or args.environment,
+    command = [sys.executable, str(ROOT / EVALUATE_SCRIPTS[kind]),
+               "--environment", args.evaluate_on or args.environment,
                "--episodes", str(args.episodes), "--seed", "0", "--json", str(run_dir / "evaluation.json")]
     if kind == "hebbian":
         policy = json.loads((run_dir / "config.json").read_text())["policy"]
@@ -146,7 +147,8 @@ def table(results: dict[str, dict[int, dict]], seeds: list[int]) -> str:
     def row(cells: list[str]) -> str:
         return "| " + " | ".join(cells) + " |"
 
-    lines = [row(["arm", *(f"seed {seed}" for seed in seeds), "mean", *names]), row(["---"] * (len(seeds) + 2 + len(names)))]
+    lines = [row(["arm", *(f"seed {seed}" for seed in seeds), "mean", *names]),
+             row(["---"] * (len(seeds) + 2 + len(names)))]
     for arm, runs in results.items():
         per_seed = [sum(sum(e["returns"]) for e in runs[seed]["environments"])
                     / sum(len(e["returns"]) for e in runs[seed]["environments"]) for seed in seeds]
