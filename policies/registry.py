@@ -81,7 +81,7 @@ class PolicySettings:
     reservoir_units: int = setting(100, low=1, high=MAX_UNITS, requires=("reservoir", True), scripts=EVALUATED,
                                    evaluation=True, metavar="N", group=RESERVOIR, help="its neurons (ER-MRL's --units)")
     # the reservoir's hyperparameters, or with reservoir_evolve where their evolution starts; default: those
-    # ER-MRL's CMA-ES found for PPO on CartPole without velocities (README: lr 0.34, sr 1.00), a classic
+    # ER-MRL's CMA-ES found for PPO on CartPole without velocities (docs/reservoirs.md: lr 0.34, sr 1.00), a classic
     # echo state network (memory of a few steps, at the edge of stability), and ER-MRL's input scaling 1
     reservoir_lr: float = setting(0.3, low=0, high=1, low_open=True, requires=("reservoir", True), scripts=EVALUATED,
                                   evaluation=True, metavar="LR", group=RESERVOIR,

@@ -1,6 +1,6 @@
 """ER-MRL's evolve_generalization.py: evolve reservoirs on several environments (mean normalised score).
 
-Run from anywhere, e.g. `python scripts/evolve_generalization.py --help`; README "Evolved reservoirs (ER-MRL)".
+Run from anywhere, e.g. `python scripts/evolve_generalization.py --help`; docs/reservoirs.md.
 """
 
 import sys

@@ -1,6 +1,6 @@
 """ER-MRL's evolve_multi_res.py: evolve several reservoirs read by one agent, on one environment.
 
-Run from anywhere, e.g. `python scripts/evolve_multi_res.py --help`; README "Evolved reservoirs (ER-MRL)".
+Run from anywhere, e.g. `python scripts/evolve_multi_res.py --help`; docs/reservoirs.md.
 """
 
 import sys

@@ -1,6 +1,6 @@
 """ER-MRL's evolve_res.py: evolve one reservoir's hyperparameters (lr, sr, iss) on one environment.
 
-Run from anywhere, e.g. `python scripts/evolve_res.py --help`; README "Evolved reservoirs (ER-MRL)".
+Run from anywhere, e.g. `python scripts/evolve_res.py --help`; docs/reservoirs.md.
 """
 
 import sys

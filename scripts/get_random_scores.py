@@ -1,6 +1,6 @@
 """ER-MRL's get_random_scores.py: the mean return of a random agent, the R_random of the normalised score.
 
-Run from anywhere, e.g. `python scripts/get_random_scores.py --help`; README "Evolved reservoirs (ER-MRL)".
+Run from anywhere, e.g. `python scripts/get_random_scores.py --help`; docs/reservoirs.md.
 """
 
 import sys

@@ -1,6 +1,6 @@
 """ER-MRL's test.py: train PPO with and without the best reservoir evolved by evolve_res.py.
 
-Run from anywhere, e.g. `python scripts/test.py --help`; README "Evolved reservoirs (ER-MRL)".
+Run from anywhere, e.g. `python scripts/test.py --help`; docs/reservoirs.md.
 """
 
 import sys

@@ -1,6 +1,6 @@
 """ER-MRL's test_generalization.py: train PPO with and without reservoirs evolved on other environments.
 
-Run from anywhere, e.g. `python scripts/test_generalization.py --help`; README "Evolved reservoirs (ER-MRL)".
+Run from anywhere, e.g. `python scripts/test_generalization.py --help`; docs/reservoirs.md.
 """
 
 import sys

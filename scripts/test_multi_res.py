@@ -1,6 +1,6 @@
 """ER-MRL's test_multi_res.py: train PPO with and without the best reservoirs evolved by evolve_multi_res.py.
 
-Run from anywhere, e.g. `python scripts/test_multi_res.py --help`; README "Evolved reservoirs (ER-MRL)".
+Run from anywhere, e.g. `python scripts/test_multi_res.py --help`; docs/reservoirs.md.
 """
 
 import sys

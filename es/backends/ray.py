@@ -94,7 +94,7 @@ def _connection_problem(address: str, error: ConnectionError) -> str:
         return ("--ray_address auto: no Ray cluster runs on this machine; start one with `ray start --head`, "
                 "or leave --ray_address out to start a local Ray")
     return (f"--ray_address {address}: {_first_sentence(error)}; a cluster with token authentication "
-            "needs RAY_AUTH_MODE=token here too (see README, Running on a cluster)")
+            "needs RAY_AUTH_MODE=token here too (see docs/cluster.md)")
 
 
 def actor_count(requested: int | None) -> int:

@@ -43,7 +43,7 @@ from es.runfolder import named_file  # noqa: E402
 from experiments.paper import latest_run, run  # noqa: E402
 
 DEFAULT_ENV = "experiments.reservoir_front.partial:CartPoleNoVelocity-v1"
-# the reservoir ER-MRL evolved for PPO on CartPole without velocities (README, "Evolved reservoirs (ER-MRL)":
+# the reservoir ER-MRL evolved for PPO on CartPole without velocities (docs/reservoirs.md:
 # trial 7, sr 1.00, lr 0.34), given as it is to the ES arms
 GIVEN = ("--reservoir", "--reservoir_lr", "0.34", "--reservoir_sr", "1.0")
 EVOLVED = ("--reservoir", "--reservoir_evolve")
