@@ -374,7 +374,7 @@ def check_checkpoint(checkpoint: Checkpoint, es: ESSettings, obs_norm: bool, pat
 def _arrays(checkpoint: Checkpoint) -> list[tuple[str, np.ndarray]]:
     """The arrays the run goes on from (the fitness log is only a record: a failed episode may be NaN)."""
     found = [("theta", checkpoint.theta), ("best_theta", checkpoint.best_theta)]
-    for group in ("optimizer", "observations", "best_observations"):
+    for group in ("optimizer", "strategy", "observations", "best_observations"):
         found += [(f"{group}.{key}", np.asarray(array)) for key, array in getattr(checkpoint, group).items()]
     return found
 
@@ -382,6 +382,8 @@ def _arrays(checkpoint: Checkpoint) -> list[tuple[str, np.ndarray]]:
 def _check_optimizer_state(checkpoint: Checkpoint, es: ESSettings, refuse: Callable) -> None:
     """The keys the run's optimiser keeps (those one step from nothing makes), each of theta's size but
     for counters; a generation-0 checkpoint has none yet."""
+    if es.strategy != "openai":  # another strategy keeps its own state, checked when it is restored
+        return
     dim = checkpoint.theta.size
     zeros = np.zeros(dim, np.float32)
     _, fresh = make_optimizer(es).step(zeros, zeros.astype(np.float64), 2, 1.0, 1.0, {})

@@ -32,7 +32,7 @@ returns the new state and a dict of metrics.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -40,8 +40,12 @@ from es.noise import NoiseTable
 from es.optimizers import Optimizer, OptimizerState, make_optimizer
 from es.shaping import SHAPINGS, Shaping
 
-if TYPE_CHECKING:
-    from es.settings import ESSettings
+
+class ESSettings(Protocol):
+    """What a strategy reads of its settings: ``es.settings.ESSettings``, which imports the strategy
+    registry for its choices, so the strategies name it by this protocol instead of importing it."""
+
+    def __getattr__(self, name: str) -> Any: ...
 
 
 @dataclass(frozen=True)

@@ -11,20 +11,16 @@ strategy only through that interface.
 
 Adding a strategy: one module with a factory, one entry here, and its settings as fields of
 ``es.settings.ESSettings`` (each ``setting()`` requiring its strategy). ``tests/test_strategies.py``
-runs every entry. Nothing here imports ``es.settings`` at run time (it imports this registry).
+runs every entry. Nothing here imports ``es.settings`` (it imports this registry for its choices).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING
 
 from es.strategies import ars, cma, pgpe, snes
 from es.strategies.pgpe import PGPE_OPTIMIZERS
-from es.strategy import OpenES, Strategy
-
-if TYPE_CHECKING:
-    from es.settings import ESSettings
+from es.strategy import ESSettings, OpenES, Strategy
 
 
 def _openai(settings: ESSettings, dim: int) -> Strategy:

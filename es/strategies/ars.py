@@ -26,15 +26,11 @@ survival-bonus shift for Humanoid is not applied.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from es.noise import NoiseTable
-from es.strategy import ESState, Population, check_fitness, mirrored_population
-
-if TYPE_CHECKING:
-    from es.settings import ESSettings
+from es.strategy import ESSettings, ESState, Population, check_fitness, mirrored_population
 
 
 def finite_rewards(fitness: np.ndarray) -> np.ndarray | None:

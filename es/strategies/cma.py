@@ -24,15 +24,11 @@ exceeds half of the machine's memory and names sep_cma_es, whose covariance is d
 from __future__ import annotations
 
 import os
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from es.noise import NoiseTable
-from es.strategy import ESState, Population, check_fitness
-
-if TYPE_CHECKING:
-    from es.settings import ESSettings
+from es.strategy import ESSettings, ESState, Population, check_fitness
 
 INSTALL_HINT = "pip install -r requirements-strategies.txt (or pip install -e .[strategies])"
 STATE = ("_mean", "_sigma", "_C", "_p_sigma", "_pc", "_g", "_funhist_values")  # what tell() changes

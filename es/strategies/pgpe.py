@@ -34,17 +34,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from es.noise import NoiseTable
 from es.optimizers import Adam, OptimizerState
 from es.shaping import rank
-from es.strategy import ESState, Population, check_fitness, mirrored_population
-
-if TYPE_CHECKING:
-    from es.settings import ESSettings
+from es.strategy import ESSettings, ESState, Population, check_fitness, mirrored_population
 
 
 def clipup_velocity(velocity: np.ndarray, gradient: np.ndarray, step_size: float, max_speed: float,

@@ -22,15 +22,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from es.noise import NoiseTable
-from es.strategy import ESState, Population, check_fitness
-
-if TYPE_CHECKING:
-    from es.settings import ESSettings
+from es.strategy import ESSettings, ESState, Population, check_fitness
 
 
 def default_sigma_lr(dim: int) -> float:
