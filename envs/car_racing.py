@@ -26,7 +26,10 @@ touch them) and computes the same picture with less work:
   compiled drawing cannot promise to reproduce (a coordinate beyond +-16383, a colour that is not
   plain RGB, a surface that is not 32-bit XRGB), go through pygame's own drawing calls, fewer of
   them, on reused surfaces;
-- the font and the rendered score text are made once instead of at every frame.
+- the font and the rendered score text are made once instead of at every frame;
+- resets generate the stock track (same doubles, same random draws, same bodies in the same order)
+  with its loops compiled by numba and the tile bodies made with fewer wrapper calls
+  (``envs.car_racing_track``, issue 21).
 
 Observations and ``render()`` frames are ``np.array_equal`` to the stock class's:
 ``tests/test_car_racing.py`` checks the environment side by side with Gymnasium's class and each
@@ -45,7 +48,7 @@ from gymnasium.envs.box2d import car_dynamics
 from gymnasium.envs.box2d import car_racing as stock
 from pygame import gfxdraw
 
-from envs import pygame_raster
+from envs import car_racing_track, pygame_raster
 from envs.car_racing_observation import SpanObservation
 
 _W, _H = stock.WINDOW_W, stock.WINDOW_H
@@ -197,6 +200,18 @@ class FastCarRacing(stock.CarRacing):
         self._car_fixtures: list[tuple[int, np.ndarray]] = []
         self._grass_corners = _grass_corners()
         self._playfield = _playfield_corners()
+        self._tile_body = car_racing_track.static_body_def()
+
+    def _create_track(self) -> bool:
+        """The stock track, ``road_poly`` and tile bodies, generated in numba (``envs.car_racing_track``)."""
+        road = car_racing_track.create_track(self, self._tile_body)
+        if road is None:
+            return False
+        # _world_polygons' cache, from the same doubles road_poly holds
+        self._world_corners = np.concatenate([self._grass_corners, road])
+        self._road_colors = [color for _, color in self.road_poly]
+        self._road_source = self.road_poly
+        return True
 
     # --- one frame ---------------------------------------------------------------------------
 
