@@ -254,6 +254,7 @@ class FastCarRacing(stock.CarRacing):
         self._road_source: list | None = None
         self._world_corners = np.empty((0, 4, 2))
         self._road_colors: list = []
+        self._road_color_rows: np.ndarray | None = None  # the same colours as rows, when made so
         self._car_source: car_dynamics.Car | None = None
         self._car_fixtures: list[tuple[int, np.ndarray]] = []
         self._grass_corners = _grass_corners()
@@ -262,9 +263,10 @@ class FastCarRacing(stock.CarRacing):
 
     def _create_track(self) -> bool:
         """The stock track, ``road_poly`` and tile bodies, generated in numba (``envs.car_racing_track``)."""
-        road = car_racing_track.create_track(self, self._tile_body)
-        if road is None:
+        made = car_racing_track.create_track(self, self._tile_body)
+        if made is None:
             return False
+        road, self._road_color_rows = made
         # _world_polygons' cache, from the same doubles road_poly holds
         self._world_corners = np.concatenate([self._grass_corners, road])
         self._road_colors = [color for _, color in self.road_poly]
@@ -360,6 +362,7 @@ class FastCarRacing(stock.CarRacing):
             road = np.array([poly for poly, _ in road_poly], dtype=np.float64).reshape(-1, 4, 2)
             self._world_corners = np.concatenate([self._grass_corners, road])
             self._road_colors = [color for _, color in road_poly]  # never copies: visited tiles change
+            self._road_color_rows = None
             self._road_source = road_poly
         return self._world_corners
 
@@ -543,13 +546,17 @@ class FastCarRacing(stock.CarRacing):
             if grass is None:
                 return None
             values[is_grass] = grass
-        road = [self._road_colors[index] for index in (drawn[~is_grass] - grass_count).tolist()]
-        if road:
-            try:
-                colors = np.array(road, dtype=np.float64)  # read now: visited tiles change colour
-            except (TypeError, ValueError):
-                return None
-            if colors.shape != (len(road), 3) or not np.all((colors > -1) & (colors < 256)):  # NaN too
+        road_index = drawn[~is_grass] - grass_count
+        if len(road_index):
+            if self._road_color_rows is not None:  # the tiles' colours are its rows (envs.car_racing_track)
+                colors = self._road_color_rows[road_index]
+            else:
+                try:
+                    road = [self._road_colors[index] for index in road_index.tolist()]
+                    colors = np.array(road, dtype=np.float64)  # read now: visited tiles change colour
+                except (TypeError, ValueError):
+                    return None
+            if colors.shape != (len(road_index), 3) or not np.all((colors > -1) & (colors < 256)):  # NaN too
                 return None
             rgb = np.trunc(colors).astype(np.int64)  # the stock's int(c): 0..255
             values[~is_grass] = (rgb[:, 0] << 16) | (rgb[:, 1] << 8) | rgb[:, 2]  # XRGB8888 (_make_surfaces)

@@ -203,11 +203,13 @@ def checkpoints(env: stock.CarRacing) -> np.ndarray:
     return rows
 
 
-def create_track(env: stock.CarRacing, body_def: b2BodyDef) -> np.ndarray | None:
+def create_track(env: stock.CarRacing, body_def: b2BodyDef) -> tuple[np.ndarray, np.ndarray] | None:
     """The stock ``_create_track`` on ``env``: the same track, ``road_poly``, bodies and draws.
 
     ``body_def`` is a static body definition reused for every tile (the stock makes one per tile).
-    Returns ``road_poly``'s corners (K, 4, 2), or None where the stock method returns False.
+    Returns ``road_poly``'s corners (K, 4, 2) and colours (K, 3), or None where the stock method
+    returns False. A tile's ``color`` (the array ``road_poly`` holds, which the contact listener
+    changes in place) is a row of those colours: the colours read there are always the tiles'.
     """
     env.road = []
     i1, i2, glued, track, tiles = track_and_tiles(checkpoints(env), env.start_alpha)
@@ -223,6 +225,8 @@ def create_track(env: stock.CarRacing, body_def: b2BodyDef) -> np.ndarray | None
     set_vertex, set_shape = shape.set_vertex, shape._b2PolygonShape__set_vertices_internal
     road_color, road, road_poly = env.road_color, env.road, env.road_poly
     white, red = (255, 255, 255), (255, 0, 0)
+    colors = np.empty((len(tiles) + int(np.count_nonzero(~np.isnan(tiles[:, 8]))), 3))
+    k = 0
     for i, row in enumerate(tiles.tolist()):
         l1, r1, r2, l2 = (row[0], row[1]), (row[2], row[3]), (row[4], row[5]), (row[6], row[7])
         set_vertex(0, *l1)
@@ -234,7 +238,9 @@ def create_track(env: stock.CarRacing, body_def: b2BodyDef) -> np.ndarray | None
         body = create_body(body_def)
         fixture = create_fixture(body, fixture_def)
         body.userData = body
-        body.color = color = road_color + 0.01 * (i % 3) * 255
+        colors[k] = road_color + 0.01 * (i % 3) * 255
+        body.color = color = colors[k]
+        k += 1
         body.road_visited = False
         body.road_friction = 1.0
         body.idx = i
@@ -244,9 +250,11 @@ def create_track(env: stock.CarRacing, body_def: b2BodyDef) -> np.ndarray | None
         if row[8] == row[8]:  # a border (NaN otherwise)
             border = [(row[8], row[9]), (row[10], row[11]), (row[12], row[13]), (row[14], row[15])]
             road_poly.append((border, white if i % 2 == 0 else red))
+            colors[k] = road_poly[-1][1]
+            k += 1
     env.track = [tuple(row) for row in track.tolist()]
     corners = tiles.reshape(-1, 8)  # each tile's road, then its border (NaN where none)
-    return corners[~np.isnan(corners[:, 0])].reshape(-1, 4, 2)
+    return corners[~np.isnan(corners[:, 0])].reshape(-1, 4, 2), colors
 
 
 def static_body_def() -> b2BodyDef:

@@ -191,7 +191,9 @@ def test_resets_generate_gymnasiums_track_float_for_float(capsys):
         assert len(fast.world.bodies) == len(stock.world.bodies)
         assert fast.np_random.bit_generator.state == stock.np_random.bit_generator.state
         # the drawing's cache of the road's corners is what road_poly gives
-        cached = fast._world_corners.copy()
+        cached, rows = fast._world_corners.copy(), fast._road_color_rows
+        assert np.array_equal(rows, [color for _, color in stock.road_poly])
+        assert all(np.shares_memory(tile.color, rows) for tile in fast.road)  # changed in place: still rows
         fast._road_source = None
         assert np.array_equal(fast._world_polygons(), cached)
     assert retries == 4  # the failure paths were taken too
