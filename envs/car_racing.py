@@ -26,7 +26,10 @@ touch them) and computes the same picture with less work:
   compiled drawing cannot promise to reproduce (a coordinate beyond +-16383, a colour that is not
   plain RGB, a surface that is not 32-bit XRGB), go through pygame's own drawing calls, fewer of
   them, on reused surfaces;
-- the font and the rendered score text are made once instead of at every frame.
+- the font and the rendered score text are made once instead of at every frame;
+- resets generate the stock track (same doubles, same random draws, same bodies in the same order)
+  with its loops compiled by numba and the tile bodies made with fewer wrapper calls
+  (``envs.car_racing_track``, issue 21).
 
 Observations and ``render()`` frames are ``np.array_equal`` to the stock class's:
 ``tests/test_car_racing.py`` checks the environment side by side with Gymnasium's class and each
@@ -43,9 +46,10 @@ import numpy as np
 import pygame
 from gymnasium.envs.box2d import car_dynamics
 from gymnasium.envs.box2d import car_racing as stock
+from numba import njit
 from pygame import gfxdraw
 
-from envs import pygame_raster
+from envs import car_racing_track, pygame_raster
 from envs.car_racing_observation import SpanObservation
 
 _W, _H = stock.WINDOW_W, stock.WINDOW_H
@@ -73,6 +77,63 @@ def _rotated(x: np.ndarray, y: np.ndarray, angle: float) -> tuple[np.ndarray, np
         return [(x, y), (-y, x), (-x, -y), (y, -x)][quarter_turns]
     sine, cosine = math.sin(angle), math.cos(angle)
     return cosine * x - sine * y, sine * x + cosine * y
+
+
+def _rotation(angle: float) -> tuple[int, float, float]:
+    """``_rotated``'s case: (quarter turns, 0, 0) at a multiple of pi/2, else (-1, sine, cosine)."""
+    angle = math.fmod(angle, 2 * math.pi)
+    if angle < 0:
+        angle += 2 * math.pi
+    epsilon = _PYGAME_VECTOR_EPSILON
+    if math.fmod(angle + epsilon, math.pi / 2) < 2 * epsilon:
+        return int((angle + epsilon) / (math.pi / 2)) % 4, 0.0, 0.0
+    return -1, math.sin(angle), math.cos(angle)
+
+
+@njit(cache=True, nogil=True)
+def _cull(corners: np.ndarray, quarter: int, sine: float, cosine: float, zoom: float, tx: float,
+          ty: float) -> tuple[np.ndarray, np.ndarray]:
+    """``to_screen`` of polygons (K, 4, 2), then ``_visible_polygons``' two tests, in one pass:
+    the same operations on the same doubles (no fastmath: nothing is fused or reordered)."""
+    count = corners.shape[0]
+    screen = np.empty(corners.shape)
+    near = np.zeros(count, dtype=np.bool_)
+    representable = True  # pygame_pixels: every drawn coordinate's int() reproducible
+    for k in range(count):
+        for j in range(4):
+            x, y = corners[k, j, 0], corners[k, j, 1]
+            if quarter == 0:
+                rx, ry = x, y
+            elif quarter == 1:
+                rx, ry = -y, x
+            elif quarter == 2:
+                rx, ry = -x, -y
+            elif quarter == 3:
+                rx, ry = y, -x
+            else:
+                rx, ry = cosine * x - sine * y, sine * x + cosine * y
+            sx, sy = rx * zoom + tx, ry * zoom + ty
+            screen[k, j, 0], screen[k, j, 1] = sx, sy
+            if sx >= -_CULL_MARGIN and sx <= _W + _CULL_MARGIN and sy >= -_CULL_MARGIN and sy <= _H + _CULL_MARGIN:
+                near[k] = True
+    drawn = np.flatnonzero(near)
+    for k in drawn:
+        for j in range(4):
+            for axis in range(2):
+                if not abs(screen[k, j, axis]) < 2.0 ** 31:
+                    representable = False
+    if not representable:
+        return drawn, screen
+    kept = np.zeros(drawn.shape[0], dtype=np.bool_)
+    for index in range(drawn.shape[0]):
+        low_x, low_y, high_x, high_y = 1 << 20, 1 << 20, -(1 << 20), -(1 << 20)
+        for j in range(4):  # pygame_pixels then touches_screen
+            px = np.int64(np.int16(np.int64(screen[drawn[index], j, 0])))
+            py = np.int64(np.int16(np.int64(screen[drawn[index], j, 1])))
+            low_x, high_x = min(low_x, px), max(high_x, px)
+            low_y, high_y = min(low_y, py), max(high_y, py)
+        kept[index] = high_x >= 0 and low_x <= _W - 1 and high_y >= 0 and low_y <= _H - 1
+    return drawn[kept], screen
 
 
 def rotate_like_pygame(points: np.ndarray, angle: float) -> np.ndarray:
@@ -193,10 +254,24 @@ class FastCarRacing(stock.CarRacing):
         self._road_source: list | None = None
         self._world_corners = np.empty((0, 4, 2))
         self._road_colors: list = []
+        self._road_color_rows: np.ndarray | None = None  # the same colours as rows, when made so
         self._car_source: car_dynamics.Car | None = None
         self._car_fixtures: list[tuple[int, np.ndarray]] = []
         self._grass_corners = _grass_corners()
         self._playfield = _playfield_corners()
+        self._tile_body = car_racing_track.static_body_def()
+
+    def _create_track(self) -> bool:
+        """The stock track, ``road_poly`` and tile bodies, generated in numba (``envs.car_racing_track``)."""
+        made = car_racing_track.create_track(self, self._tile_body)
+        if made is None:
+            return False
+        road, self._road_color_rows = made
+        # _world_polygons' cache, from the same doubles road_poly holds
+        self._world_corners = np.concatenate([self._grass_corners, road])
+        self._road_colors = [color for _, color in self.road_poly]
+        self._road_source = self.road_poly
+        return True
 
     # --- one frame ---------------------------------------------------------------------------
 
@@ -287,6 +362,7 @@ class FastCarRacing(stock.CarRacing):
             road = np.array([poly for poly, _ in road_poly], dtype=np.float64).reshape(-1, 4, 2)
             self._world_corners = np.concatenate([self._grass_corners, road])
             self._road_colors = [color for _, color in road_poly]  # never copies: visited tiles change
+            self._road_color_rows = None
             self._road_source = road_poly
         return self._world_corners
 
@@ -296,13 +372,7 @@ class FastCarRacing(stock.CarRacing):
         The stock test first (some corner within ``MAX_SHAPE_DIM`` of the screen), then the exact
         one: pygame would clip away every pixel of a polygon wholly beyond one side of the screen.
         """
-        screen = to_screen(self._world_polygons(), zoom, translation, angle)
-        x, y = screen[..., 0], screen[..., 1]
-        inside = (x >= -_CULL_MARGIN) & (x <= _W + _CULL_MARGIN) & (y >= -_CULL_MARGIN) & (y <= _H + _CULL_MARGIN)
-        drawn = np.flatnonzero(inside.any(axis=1))
-        pixels = pygame_pixels(screen[drawn])
-        if pixels is not None:
-            drawn = drawn[touches_screen(pixels)]
+        drawn, screen = _cull(self._world_polygons(), *_rotation(angle), zoom, *translation)
         return drawn, screen[drawn]
 
     def _polygon_color(self, index: int):
@@ -438,15 +508,13 @@ class FastCarRacing(stock.CarRacing):
                  (wheels[3].omega, vertical(10, 0.01 * wheels[3].omega), (51, 0, 255)),
                  (wheels[0].joint.angle, horizontal(20, -10.0 * wheels[0].joint.angle), (0, 255, 0)),
                  (car.hull.angularVelocity, horizontal(30, -0.8 * car.hull.angularVelocity), (255, 0, 0))]
-        polygons = []
-        for value, points, color in shown:
-            if abs(value) > 1e-4:  # the stock render_if_min
-                coordinates = [c for point in points for c in point]
-                if not all(abs(c) < _COMPILED_BOUND for c in coordinates):  # also False for NaN
-                    return None
-                integers = np.array(coordinates, dtype=np.float64).astype(np.int64)  # truncation, as pygame
-                polygons.append((integers[0::2], integers[1::2], (color[0] << 16) | (color[1] << 8) | color[2]))
-        return polygons
+        kept = [(points, color) for value, points, color in shown if abs(value) > 1e-4]  # the stock render_if_min
+        corners = np.array([points for points, _ in kept], dtype=np.float64)  # (polygons, 4, 2)
+        if not np.all(np.abs(corners) < _COMPILED_BOUND):  # also False for NaN
+            return None
+        integers = corners.astype(np.int64)  # truncation, as pygame
+        return [(integers[index, :, 0], integers[index, :, 1], (color[0] << 16) | (color[1] << 8) | color[2])
+                for index, (_, color) in enumerate(kept)]
 
     def _score_image(self) -> tuple[np.ndarray, int, int]:
         """The score's pixels as the stock blit writes them, and where: made once per distinct text."""
@@ -478,13 +546,17 @@ class FastCarRacing(stock.CarRacing):
             if grass is None:
                 return None
             values[is_grass] = grass
-        road = [self._road_colors[index] for index in (drawn[~is_grass] - grass_count).tolist()]
-        if road:
-            try:
-                colors = np.array(road, dtype=np.float64)  # read now: visited tiles change colour
-            except (TypeError, ValueError):
-                return None
-            if colors.shape != (len(road), 3) or not np.all((colors > -1) & (colors < 256)):  # NaN too
+        road_index = drawn[~is_grass] - grass_count
+        if len(road_index):
+            if self._road_color_rows is not None:  # the tiles' colours are its rows (envs.car_racing_track)
+                colors = self._road_color_rows[road_index]
+            else:
+                try:
+                    road = [self._road_colors[index] for index in road_index.tolist()]
+                    colors = np.array(road, dtype=np.float64)  # read now: visited tiles change colour
+                except (TypeError, ValueError):
+                    return None
+            if colors.shape != (len(road_index), 3) or not np.all((colors > -1) & (colors < 256)):  # NaN too
                 return None
             rgb = np.trunc(colors).astype(np.int64)  # the stock's int(c): 0..255
             values[~is_grass] = (rgb[:, 0] << 16) | (rgb[:, 1] << 8) | rgb[:, 2]  # XRGB8888 (_make_surfaces)

@@ -108,10 +108,18 @@ class PixelObservation(gym.ObservationWrapper):
 
         self._cv2 = cv2
         self.observation_space = spaces.Box(0.0, 1.0, (3, self.SIZE, self.SIZE), dtype=np.float32)
+        self._frame = np.empty((self.SIZE, self.SIZE, 3), dtype=np.uint8)  # cv2 resizes into it
 
     def observation(self, observation: np.ndarray) -> np.ndarray:
-        frame = self._cv2.resize(observation, (self.SIZE, self.SIZE), interpolation=self._cv2.INTER_AREA)
-        return np.ascontiguousarray(np.swapaxes(frame.astype(np.float32) / 255.0, 0, 2))
+        """The same float32s as ``swapaxes(frame.astype(float32) / 255.0, 0, 2)``, made contiguous,
+        with one conversion and no intermediate array (the result is new: callers may keep it)."""
+        frame = self._frame
+        if observation.dtype == np.uint8 and observation.ndim == 3 and observation.shape[2] == 3:
+            frame = self._cv2.resize(observation, (self.SIZE, self.SIZE), dst=frame, interpolation=self._cv2.INTER_AREA)
+        else:  # another dtype resizes to its own
+            frame = self._cv2.resize(observation, (self.SIZE, self.SIZE), interpolation=self._cv2.INTER_AREA)
+        out = np.empty((3, self.SIZE, self.SIZE), dtype=np.float32)
+        return np.divide(frame.transpose(2, 1, 0), np.float32(255.0), out=out, dtype=np.float32)
 
 
 class BurnIn(gym.Wrapper):

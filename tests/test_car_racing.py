@@ -15,14 +15,15 @@ import gymnasium as gym
 import numpy as np
 import pygame
 import pytest
-from gymnasium.envs.box2d.car_racing import PLAYFIELD, CarRacing
+from gymnasium.envs.box2d.car_racing import MAX_SHAPE_DIM, PLAYFIELD, CarRacing
 from pygame import gfxdraw
 
 import envs
 from envs import pygame_raster
-from envs.car_racing import FastCarRacing, box2d_transform, covers_screen, pygame_pixels, rotate_like_pygame
+from envs.car_racing import FastCarRacing, box2d_transform, covers_screen, pygame_pixels, rotate_like_pygame, to_screen
 from envs.car_racing_observation import SpanObservation
 from envs.make import STOCK_CAR_RACING_ID as STOCK_ID
+from envs.wrappers import PixelObservation
 
 
 def pair(render_mode: str | None = None, **kwargs) -> tuple[gym.Env, gym.Env]:
@@ -163,6 +164,82 @@ def test_domain_randomisation_and_discrete_actions():
     assert_same_episode(17, rng.uniform([-1, 0, 0], [1, 1, 1], size=(50, 3)).astype(np.float32), stock=stock, fast=fast)
     assert_same_episode(18, constant([0.0, 0.5, 0.0], 30), stock=stock, fast=fast, options={"randomize": False})
     assert_same_episode(19, rng.integers(0, 5, size=50).tolist(), continuous=False)
+
+
+def tile_record(tile) -> tuple:
+    """What the contact listener and the drawing read from a tile body, and its fixture's shape."""
+    fixture = tile.fixtures[0]
+    assert tile.userData is tile and len(tile.fixtures) == 1
+    return (tile.idx, tile.road_visited, tile.road_friction, tuple(tile.color), tile.type, fixture.sensor,
+            tuple(map(tuple, fixture.shape.vertices)), fixture.friction, fixture.density)
+
+
+def test_resets_generate_gymnasiums_track_float_for_float(capsys):
+    stock, fast = CarRacing(verbose=True), FastCarRacing(verbose=True)
+    retries = 0
+    for seed in range(120):  # seeds 36, 100, 105 and 118 fail a first track and retry
+        stock.reset(seed=seed)
+        expected_output = capsys.readouterr().out
+        fast.reset(seed=seed)
+        assert capsys.readouterr().out == expected_output
+        retries += expected_output.count("retry")
+        assert fast.track == stock.track and all(type(v) is float for row in fast.track for v in row)
+        assert len(fast.road_poly) == len(stock.road_poly)
+        for (corners, color), (expected_corners, expected_color) in zip(fast.road_poly, stock.road_poly):
+            assert corners == expected_corners and np.array_equal(color, expected_color)
+        assert [tile_record(t) for t in fast.road] == [tile_record(t) for t in stock.road]
+        assert len(fast.world.bodies) == len(stock.world.bodies)
+        assert fast.np_random.bit_generator.state == stock.np_random.bit_generator.state
+        # the drawing's cache of the road's corners is what road_poly gives
+        cached, rows = fast._world_corners.copy(), fast._road_color_rows
+        assert np.array_equal(rows, [color for _, color in stock.road_poly])
+        assert all(np.shares_memory(tile.color, rows) for tile in fast.road)  # changed in place: still rows
+        fast._road_source = None
+        assert np.array_equal(fast._world_polygons(), cached)
+    assert retries == 4  # the failure paths were taken too
+
+
+def plain_visible_polygons(corners: np.ndarray, zoom: float, translation, angle: float) -> tuple:
+    """``_visible_polygons`` written with numpy from its definition: the stock margin test, then
+    pygame's clip of the Sint16 corners."""
+    screen = to_screen(corners, zoom, translation, angle)
+    x, y = screen[..., 0], screen[..., 1]
+    near = (x >= -MAX_SHAPE_DIM) & (x <= 1000 + MAX_SHAPE_DIM) & (y >= -MAX_SHAPE_DIM) & (y <= 800 + MAX_SHAPE_DIM)
+    drawn = np.flatnonzero(near.any(axis=1))
+    pixels = pygame_pixels(screen[drawn])
+    if pixels is not None:
+        low, high = pixels.min(axis=1), pixels.max(axis=1)
+        drawn = drawn[(high[:, 0] >= 0) & (low[:, 0] <= 999) & (high[:, 1] >= 0) & (low[:, 1] <= 799)]
+    return drawn, screen[drawn]
+
+
+def test_compiled_culling_is_the_numpy_definition():
+    fast = FastCarRacing()
+    fast.reset(seed=5)
+    rng = np.random.default_rng(23)
+    for case in range(600):
+        quarter = rng.integers(-8, 8) * math.pi / 2 + rng.choice([0.0, 1e-7, -1e-7, 3e-6])
+        angle = rng.uniform(-10, 10) if case % 3 else quarter  # pygame's exact quarter turns too
+        zoom = float(rng.choice([0.6, 16.2, rng.uniform(0.6, 16.2), 1e9]))  # 1e9: beyond Sint16
+        translation = (rng.uniform(-3000, 3000), rng.uniform(-3000, 3000))
+        expected = plain_visible_polygons(fast._world_polygons(), zoom, translation, angle)
+        drawn, screen = fast._visible_polygons(zoom, translation, angle)
+        assert np.array_equal(drawn, expected[0]) and np.array_equal(screen, expected[1])
+
+
+def test_pixel_preprocessing_is_the_plain_formula():
+    import cv2
+
+    wrapper = PixelObservation(FastCarRacing())
+    rng = np.random.default_rng(24)
+    for case in range(50):
+        frame = rng.integers(0, 256, size=(96, 96, 3), dtype=np.uint8)
+        frame = frame.transpose(1, 0, 2) if case % 2 else frame  # not contiguous
+        resized = cv2.resize(frame, (84, 84), interpolation=cv2.INTER_AREA)
+        expected = np.ascontiguousarray(np.swapaxes(resized.astype(np.float32) / 255.0, 0, 2))
+        got = wrapper.observation(frame)
+        assert got.dtype == np.float32 and got.flags.c_contiguous and np.array_equal(got, expected)
+    assert wrapper.observation(frame) is not wrapper.observation(frame)  # callers may keep one
 
 
 def test_rotation_is_pygames_bit_for_bit():
