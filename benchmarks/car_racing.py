@@ -50,6 +50,7 @@ from throughput import generation_tasks
 import envs
 from envs import ProblemSpec
 from envs.make import STOCK_CAR_RACING_ID as STOCK_ID
+from envs.rollout import rollout
 from envs.wrappers import CarRacingAction, PixelObservation
 from es.backends import Generation, SerialEvaluator
 from es.noise import NoiseTable
@@ -117,21 +118,31 @@ def reset_rates(rounds: int, resets: int) -> tuple[list[float], list[float]]:
     return rates[0], rates[1]
 
 
+class WithoutEarlyStop(gym.Wrapper):
+    """The recipe's pixel and action mapping straight over the class: a worker's episode without the early
+    stop, so that every episode runs to its cap."""
+
+    def __init__(self, problem):
+        self.pixels, self.squash, env = _pixel_chain(problem)
+        super().__init__(env)
+
+    def reset(self, **options):
+        frame, info = self.env.reset(**options)
+        return self.pixels.observation(frame), info
+
+    def step(self, output):
+        frame, reward, terminated, truncated, info = self.env.step(self.squash.action(output))
+        return self.pixels.observation(frame), reward, terminated, truncated, info
+
+
 def capped_episode(problem, params, seed: int, length: int) -> tuple[float, int]:
-    """CPU seconds of one episode of at most ``length`` steps, the reset included, and its steps:
-    a worker's loop without the early stop (resize, network, action mapping, env.step)."""
-    pixels, squash, env = _pixel_chain(problem)
-    policy = problem.policy
+    """CPU seconds of one episode of at most ``length`` steps, the reset included, and its steps: the
+    project's episode loop (``envs.rollout``) without the early stop (resize, network, action mapping,
+    env.step)."""
+    env = WithoutEarlyStop(problem)
     started = time.process_time()
-    frame, _ = env.reset(seed=seed)
-    state = policy.reset(params, np.random.default_rng(seed))
-    steps = 0
-    for steps in range(1, length + 1):
-        output, state = policy.act(params, state, pixels.observation(frame))
-        frame, _, terminated, truncated, _ = env.step(squash.action(output))
-        if terminated or truncated:
-            break
-    return time.process_time() - started, steps
+    episode = rollout(env, problem.policy, params, seed, max_steps=length)
+    return time.process_time() - started, episode.steps
 
 
 def _pixel_chain(problem):
@@ -392,7 +403,8 @@ def main() -> int:
         if kind == "hebbian":
             hebbian_step = (1 / statistics.median(stock), 1 / statistics.median(fast))
     for workers in (2, 16):
-        hours = [(PAPER_POPSIZE + 1) * FULL_EPISODE * step / workers * PAPER_GENERATIONS / 3600 for step in hebbian_step]
+        hours = [(PAPER_POPSIZE + 1) * FULL_EPISODE * step / workers * PAPER_GENERATIONS / 3600
+                 for step in hebbian_step]
         print(f"projection, the paper's Hebbian run (popsize {PAPER_POPSIZE}, {PAPER_GENERATIONS} generations, "
               f"{FULL_EPISODE}-step episodes) on {workers} workers: stock {hours[0]:.1f} h, fast {hours[1]:.1f} h")
     for kind in ("static", "hebbian"):
