@@ -127,7 +127,16 @@ def experiment_values(path: str, kind: str) -> dict:
 
 
 def config_for_resume(kind: str, args: argparse.Namespace) -> tuple[TrainConfig, RunFolder]:
-    """The run's recorded settings, with the flags given: only the resumable ones may differ."""
+    """The run's recorded settings, with the flags given, checked (``checked_resume``); the folder is then
+    locked for this process."""
+    resumed, folder = checked_resume(kind, args)
+    folder.lock()  # held until this process exits
+    return resumed, folder
+
+
+def checked_resume(kind: str, args: argparse.Namespace) -> tuple[TrainConfig, RunFolder]:
+    """The run's recorded settings, with the flags given: only the resumable ones may differ; the
+    checkpoint is checked against config.json before anything is written."""
     folder = RunFolder.existing(args.resume)
     try:
         config = TrainConfig.from_dict(folder.read_config(), "config.json")
@@ -152,7 +161,6 @@ def config_for_resume(kind: str, args: argparse.Namespace) -> tuple[TrainConfig,
     folder.check_resumable(config.es, config.policy.obs_norm)  # the checkpoint against config.json, before any write
     if imports := resume_imports(config.env.env_ids, config.env.recipe_modules, str(folder.path / "config.json")):
         say(imports)  # only plain module names outside the standard library are imported
-    folder.lock()  # held until this process exits
     return resumed, folder
 
 

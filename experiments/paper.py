@@ -40,7 +40,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # the project's modules, when run as a script
 
-from cli.errors import USER_ERRORS, Parser, UserError, say  # noqa: E402
+from cli.errors import USER_ERRORS, Parser, say  # noqa: E402
 from cli.flags import non_empty, positive_int, seed_value, threads_value  # noqa: E402
 from cli.hints import EVALUATE_SCRIPTS, TRAIN_SCRIPTS  # noqa: E402
 from report.stats import DEFAULT_REPS  # noqa: E402
@@ -97,25 +97,17 @@ def check_training(kind: str, command: list[str]) -> None:
     without running it: a UserError names the first problem; argparse's own errors exit with code 2."""
     import importlib
 
-    from cli.config import TrainConfig
-    from cli.train import check_resume_flags, config_from_args, given_flags
+    from cli.train import checked_resume, config_from_args
     from es.backends.process import check_workers
-    from es.runfolder import RunFolder
 
     script = importlib.import_module(Path(TRAIN_SCRIPTS[kind]).stem)
-    argv = command[2:]
-    args = script.build_parser().parse_args(argv)
+    args = script.build_parser().parse_args(command[2:])
     if args.resume is None:
-        run = config_from_args(kind, args, argv).run
+        run = config_from_args(kind, args).run
         if run.backend == "process" and not run.in_process:
             check_workers(run.workers)
         return
-    folder = RunFolder.existing(args.resume)
-    try:
-        config = TrainConfig.from_dict(folder.read_config())
-    except (ValueError, TypeError) as error:
-        raise UserError(f"{folder.path}: unreadable config.json ({error})") from None
-    check_resume_flags(config, args, given_flags(argv))
+    checked_resume(kind, args)
 
 
 def evaluate_command(args: argparse.Namespace, experiment: dict, run_dir: Path) -> list[str]:

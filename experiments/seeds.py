@@ -35,14 +35,15 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # the project's modules, when run as a script
 
 from cli import Parser, UserError  # noqa: E402
-from cli.flags import positive_int, seed_value  # noqa: E402
+from cli.config import declared  # noqa: E402
+from cli.flags import defaults, given, positive_int, seed_value  # noqa: E402
 from cli.hints import TRAIN_SCRIPTS  # noqa: E402
-from cli.train import given_flags  # noqa: E402
+from cli.train import config_from_args  # noqa: E402
 from es import files  # noqa: E402
-from es.settings import RESUMABLE  # noqa: E402
 from experiments.paper import latest_run  # noqa: E402
 
 SET_BY_LAUNCHER = ("seed", "threads", "resume")
+RESUMABLE = tuple(item.name for item in declared() if item.spec.resumable)  # what a resume may change
 RECORD = "launch.json"
 
 
@@ -80,24 +81,36 @@ def training_script(name: str) -> tuple[str, object]:
     return Path(name).name, module.build_parser()
 
 
+def given_names(values: argparse.Namespace) -> set[str]:
+    """The settings a parsed training command gives, and --resume if it does."""
+    return set(given(values)) | ({"resume"} if values.resume is not None else set())
+
+
 def check_flags(script: str, parser, flags: list[str]) -> argparse.Namespace:
     """The training flags, parsed by the script's own parser (its one-line errors), without the launcher's."""
-    owned = sorted(given_flags(flags) & set(SET_BY_LAUNCHER))
+    parser.prog = script
+    values = parser.parse_args(flags)
+    owned = sorted(given_names(values) & set(SET_BY_LAUNCHER))
     if owned:
         raise UserError(f"{', '.join('--' + name for name in owned)}: set by the launcher for each seed; "
                         "give --seeds, --first_seed and --jobs to seeds.py instead")
-    parser.prog = script
-    values = parser.parse_args(flags)
-    if "folder" not in given_flags(flags):
+    if "folder" not in given_names(values):
         raise UserError(f"give {script} a --folder for the launch (its seeds go to <folder>/seed<k>)")
+    config_from_args(values.kind, values)  # every value checked as the script will, before any run starts
     return values
+
+
+def settings_of(parser, flags: list[str]) -> dict:
+    """Every setting of a training command: the script's defaults, then the flags given."""
+    values = parser.parse_args(flags)
+    return {**defaults(values.kind, {"folder": values.default_folder}), **given(values)}
 
 
 def differences(parser, recorded: list[str], flags: list[str]) -> list[str]:
     """The settings (other than those a resume may change) where ``flags`` differ from ``recorded``."""
-    before, now = vars(parser.parse_args(recorded)), vars(parser.parse_args(flags))
+    before, now = settings_of(parser, recorded), settings_of(parser, flags)
     return [f"--{name} {now[name]} (the launch has {before[name]})" for name in sorted(now)
-            if name not in RESUMABLE and name != "folder" and now[name] != before[name]]
+            if name not in RESUMABLE and name != "folder" and now[name] != before.get(name)]
 
 
 def check_record(folder: Path, script: str, parser, flags: list[str]) -> None:

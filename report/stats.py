@@ -348,7 +348,7 @@ def report(groups: list[str], out: Path, score: str = "final", environment: str 
            reps: int = DEFAULT_REPS, seed: int = 0) -> Report:
     """Compute everything and write ``summary.md``, ``summary.csv``, ``improvement.csv``,
     ``scores.csv`` and ``report.png`` in ``out``."""
-    from report.plots import write_png
+    from report.plots import write_figure
 
     per_run = collect(groups, score, environment)
     scores = {name: list(runs.values()) for name, runs in per_run.items()}
@@ -365,5 +365,5 @@ def report(groups: list[str], out: Path, score: str = "final", environment: str 
     files.atomic_write_text(out / "scores.csv", csv_text([{"group": name, "run": str(run), "score": value}
                                                            for name, runs in per_run.items()
                                                            for run, value in runs.items()]))
-    write_png(figure(summaries, curves, taus, pairs), out / "report.png")
+    write_figure(figure(summaries, curves, taus, pairs), out / "report.png", bbox_inches="tight")
     return Report(summaries, pairs, per_run, text)

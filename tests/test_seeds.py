@@ -64,7 +64,7 @@ def test_refusals_name_the_problem(tmp_path):
     assert other.returncode == 2
     assert other.stderr.strip().splitlines() == [
         (f"seeds.py: error: {folder} holds a launch with other settings: --popsize 8 (the launch has 4); give the "
-        "same settings to resume it (only --generations, --threads, --backend, --ray_address, --print_every, "
+        "same settings to resume it (only --generations, --print_every, --threads, --backend, --ray_address, "
         "--tensorboard may change) or use another --folder")]
     kind = launch("--", "train_hebb.py", "--environment", "CartPole-v1", "--folder", str(folder))
     assert kind.returncode == 2 and "holds a launch of train_static.py, not train_hebb.py" in kind.stderr
@@ -75,7 +75,7 @@ def test_refusals_name_the_problem(tmp_path):
     script = launch("--", "evaluate_static.py", "--folder", str(tmp_path / "new"))
     assert script.returncode == 2 and "must start with one of train_static.py, train_hebb.py" in script.stderr
     bad_flag = launch("--", *TRAINING, "--lr", "-1", "--folder", str(tmp_path / "new"))
-    assert bad_flag.returncode == 2 and bad_flag.stderr.startswith("train_static.py: error: argument --lr")
+    assert bad_flag.returncode == 2 and bad_flag.stderr.startswith("seeds.py: error: --lr must be a number > 0")
     for result in (kind, seed, no_folder, script, bad_flag):
         assert len(result.stderr.strip().splitlines()) == 1, result.stderr
     assert not (tmp_path / "new").exists()  # nothing was created
