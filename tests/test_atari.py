@@ -31,7 +31,7 @@ import evaluate_static
 import train_hebb
 import train_static
 from envs.atari import FireReset, looks_like_atari
-from es.files import load_dat
+from es.files import load_dat, save_dat
 from tests.extras import need
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -69,13 +69,17 @@ def test_without_ale_py_an_atari_id_names_the_install(script, tmp_path):
                 f"import runpy; runpy.run_path({script!r}, run_name='__main__')")
     if script == "train_static.py":
         hide_ale = hide_ale.replace(", '--path_weights', 'x.dat'", "")
-    else:
+    else:  # a weight file that exists (evaluation reads it, and the config.json beside it, first)
+        weights = tmp_path / "weights"
+        weights.mkdir()
+        save_dat(weights / "x.dat", np.zeros(3, np.float32))
         hide_ale = hide_ale.replace(f", '--folder', {str(tmp_path)!r}", "")
+        hide_ale = hide_ale.replace("'x.dat'", repr(str(weights / "x.dat")))
     result = subprocess.run([sys.executable, "-c", hide_ale], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert result.returncode == 2, result.stderr
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "PongNoFrameskip-v4" in lines[0] and "pip install -r requirements-atari.txt" in lines[0]
-    assert list(tmp_path.iterdir()) == []
+    assert sorted(path.name for path in tmp_path.iterdir()) == ([] if script == "train_static.py" else ["weights"])
 
 
 # --- the FIRE reset on a stub ------------------------------------------------------------------------
