@@ -57,11 +57,16 @@ spec.loader.exec_module(generate)
 EXTRAS = {
     "reservoirs": (("reservoirpy", "stable_baselines3", "optuna", "cmaes"),
                    lambda script, args: script.startswith("scripts/") or "--reservoir" in args),
-    "ray": (("ray",), lambda script, args: "ray" in args or "ray_vs_process" in script),
+    "ray": (("ray",), lambda script, args: "ray" in args or "--ray" in args or "ray_vs_process" in script),
     "atari": (("ale_py",), lambda script, args: any(re.search(r"ALE/|NoFrameskip|Deterministic-v|pong", word)
                                                      for word in args)),
     "tensorboard": (("tensorboard",),
                     lambda script, args: "--tensorboard" in args or script.startswith("scripts/test")),
+    "strategies": (("cmaes",), lambda script, args: "cma_es" in args or "sep_cma_es" in args),
+    "stats": (("rliable", "arch", "pandas"),
+              lambda script, args: script.endswith("report_runs.py")
+              or (script.endswith("paper.py") and "report" in args)),
+    "bench": (("evotorch",), lambda script, args: script.endswith("vs_evotorch.py")),
 }
 # budgets: flag -> tiny value
 SHRINK = {"--generations": "1", "--popsize": "2", "--episodes": "1", "--eval_episodes": "1", "--eval_every": "1",
@@ -199,6 +204,9 @@ def check_parses(script: str, args: list[str]) -> None:
     checks = [(script, args)]
     if "--" in args and script.endswith("compare.py"):
         checks = [(script, args[:args.index("--")]), *((train, args[args.index("--") + 1:]) for train in TRAIN_SCRIPTS)]
+    if "--" in args and script.endswith("seeds.py"):  # its own flags, then a training command
+        after = args[args.index("--") + 1:]
+        checks = [(script, args[:args.index("--")]), (after[0], after[1:])]
     for name, words in checks:
         errors = io.StringIO()
         with contextlib.redirect_stderr(errors), contextlib.redirect_stdout(io.StringIO()):
@@ -378,6 +386,10 @@ def shrink(script: str, args: list[str], folder: PageFolder) -> list[str]:
     """The command with tiny budgets, run serially and with short episodes, writing inside ``folder``."""
     extra = args[args.index("--"):] if "--" in args else []
     args = args[:len(args) - len(extra)]
+    if script.endswith("seeds.py") and extra:  # the training command it launches, shrunk as one
+        training = shrink(extra[1], extra[2:], folder)
+        at = training.index("--threads")  # the launcher sets it
+        extra = ["--", extra[1], *training[:at], *training[at + 2:]]
     shrunk, index = [], 0
     while index < len(args):
         word = args[index]
