@@ -32,6 +32,7 @@ from cli.config import TrainConfig, declared
 from cli.flags import flag_table
 from es.files import load_dat
 from settings import options
+from tests.extras import need
 
 ROOT = Path(__file__).resolve().parent.parent
 RUNS = ROOT / "tests" / "data" / "runs_v0"
@@ -94,6 +95,8 @@ def returns(script, tmp_path: Path, *argv) -> list[float]:
 
 @pytest.mark.parametrize("name", list(RECORDED))
 def test_a_previous_versions_run_evaluates_to_its_numbers_by_the_short_and_the_long_command(name, tmp_path):
+    if name == "reservoir":
+        need("reservoirs")
     run_dir = copy_run(name, tmp_path)
     _, evaluate = SCRIPTS[name]
     weights = "last.dat" if name == "static" else "last_coeffs.dat"
@@ -107,6 +110,8 @@ def test_a_previous_versions_run_evaluates_to_its_numbers_by_the_short_and_the_l
 
 @pytest.mark.parametrize("name", list(RECORDED))
 def test_a_previous_versions_run_resumes_to_its_numbers_and_records_only_its_kinds_settings(name, tmp_path):
+    if name == "reservoir":
+        need("reservoirs")
     run_dir = copy_run(name, tmp_path)
     train, _ = SCRIPTS[name]
     code, out, err = main(train, "--resume", run_dir, "--generations", 3)
