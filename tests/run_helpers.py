@@ -124,16 +124,21 @@ def comparable_metrics(run_dir: Path) -> list[dict]:
             for row in read_metrics(run_dir / "metrics.csv")]
 
 
-def assert_same_run(first: Path, second: Path) -> None:
-    """Bit-for-bit the same weights, checkpoint and fitness log; the same metrics but for wall clock."""
-    for name in ("last.dat", "best.dat"):
-        assert load_dat(first / name).tobytes() == load_dat(second / name).tobytes(), name
+def assert_same_checkpoint_and_metrics(first: Path, second: Path) -> None:
+    """The checkpoints bit for bit but for wall clock, and the same metrics but for wall clock."""
     with np.load(first / "checkpoint.npz") as one, np.load(second / "checkpoint.npz") as other:
         assert sorted(one.files) == sorted(other.files)
         for key in one.files:
             if key != "total_seconds":
                 assert one[key].tobytes() == other[key].tobytes(), key
     assert comparable_metrics(first) == comparable_metrics(second)
+
+
+def assert_same_run(first: Path, second: Path) -> None:
+    """Bit-for-bit the same weights, checkpoint and fitness log; the same metrics but for wall clock."""
+    for name in ("last.dat", "best.dat"):
+        assert load_dat(first / name).tobytes() == load_dat(second / name).tobytes(), name
+    assert_same_checkpoint_and_metrics(first, second)
     (fitness_one,), (fitness_other,) = first.glob("Fitness_values_*.npy"), second.glob("Fitness_values_*.npy")
     assert np.load(fitness_one).tobytes() == np.load(fitness_other).tobytes()
 

@@ -43,7 +43,7 @@ from es.worker import perturb
 from policies.network import Layout
 from policies.static import WeightFile
 from tests.extras import need
-from tests.run_helpers import comparable_metrics, only_run
+from tests.run_helpers import assert_same_checkpoint_and_metrics, only_run
 
 LIBRARY = {"cma_es", "sep_cma_es"}  # the strategies of the cmaes extra
 FULL_COVARIANCE = {"cma_es"}  # d x d: the project's networks (>= 4 610 parameters) are too large for a test
@@ -436,12 +436,7 @@ def same_run(first: Path, second: Path) -> None:
     assert names and names == sorted(path.name for path in [*second.glob("last*.dat"), *second.glob("best*.dat")])
     for name in names:
         assert load_dat(first / name).tobytes() == load_dat(second / name).tobytes(), name
-    with np.load(first / "checkpoint.npz") as one, np.load(second / "checkpoint.npz") as other:
-        assert sorted(one.files) == sorted(other.files)
-        for key in one.files:
-            if key != "total_seconds":
-                assert one[key].tobytes() == other[key].tobytes(), key
-    assert comparable_metrics(first) == comparable_metrics(second)
+    assert_same_checkpoint_and_metrics(first, second)
 
 
 def script(kind: str, *argv: str) -> None:
