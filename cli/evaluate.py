@@ -49,12 +49,10 @@ def evaluation_parser(prog: str, description: str, kind: str) -> Parser:
     parser = Parser(prog=prog, description=description)
     add = parser.add_argument
     main = EVALUATE_FLAGS[MAIN_ROLE[kind]]
-    if kind == "static":
-        add(main, required=True, metavar="FILE",
-            help="the .dat file of evolved weights, or a run folder (its last.dat)")
-    else:
-        add(main, required=True, metavar="FILE",
-            help="the .dat file of Hebbian coefficients, or a run folder (its last_coeffs.dat)")
+    what = {"static": "evolved weights", "hebbian": "Hebbian coefficients"}[kind]
+    add(main, required=True, metavar="FILE",
+        help=f"the .dat file of {what}, or a run folder (its {named_file('last', MAIN_ROLE[kind])})")
+    if kind == "hebbian":
         add("--path_coev", default=None, metavar="FILE",
             help="the .dat file of CNN weights (pixel environments) or of co-evolved initial weights (default: in a "
                  "run folder, the one beside the coefficients)")
