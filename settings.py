@@ -50,6 +50,9 @@ from collections.abc import Callable
 from typing import Any
 
 SEED_RANGE = (0, 2**31 - 1)  # every seed the project takes: numpy's and Gymnasium's int32 seeds
+# an evaluated episode's seed: the training's seeds, and those of the centre's evaluation (``es.loop.EVAL_SEEDS``,
+# from 2**31 on, which no training episode uses); Gymnasium seeds an episode from any of them
+EPISODE_SEED_RANGE = (0, 2**32 - 1)
 ANY = object()  # ``requires=("eval_every", ANY)``: any value but off (False, None)
 
 

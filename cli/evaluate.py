@@ -26,7 +26,7 @@ import numpy as np
 
 from cli.config import Contradiction, TrainConfig, declared
 from cli.errors import USER_ERRORS, Parser, UserError, explained, say
-from cli.flags import add_settings, defaults, flag_value, given, positive_int, seed_value
+from cli.flags import add_settings, defaults, episode_seed_value, flag_value, given, positive_int
 from cli.hints import EVALUATE_FLAGS, EVALUATE_SCRIPTS, MAIN_ROLE
 from cli.train import resolve_environments
 from envs import ProblemSpec
@@ -36,7 +36,7 @@ from es.interrupts import honour_sigint
 from es.observations import SavedStatistics, load_statistics, statistics_path
 from es.runfolder import named_file
 from report.video import check_video_path
-from settings import SEED_RANGE, unmet_requirement
+from settings import EPISODE_SEED_RANGE, unmet_requirement
 
 COEV_ROLES = (  # --path_coev's
     "coevolved_initial_weights", "CNN_parameters")
@@ -60,7 +60,9 @@ def evaluation_parser(prog: str, description: str, kind: str) -> Parser:
         help="the evolved reservoir hyperparameters of a --reservoir_evolve run (default: in a run folder, "
              "best_reservoir.dat or last_reservoir.dat beside the weights)")
     add("--episodes", type=positive_int, default=1, metavar="N", help="episodes per environment (default: 1)")
-    add("--seed", type=seed_value, default=0, help="seed of the first episode; episode i uses seed + i (default: 0)")
+    add("--seed", type=episode_seed_value, default=0,
+        help="seed of the first episode; episode i uses seed + i; a whole number from {} to {}, the seeds from "
+             "2**31 on being those of the training's centre evaluation (default: 0)".format(*EPISODE_SEED_RANGE))
     add("--render", type=flag_value, nargs="?", const=True, default=False, metavar="BOOL",
         help="show the episodes in a window (needs a display)")
     add("--video", default=None, metavar="PATH",
@@ -277,9 +279,9 @@ def evaluate_main(kind: str, parser: Parser, argv: list[str] | None = None) -> i
         weight_file = main_file(kind, getattr(args, EVALUATE_FLAGS[MAIN_ROLE[kind]][2:]))
         check_outputs(args, [str(weight_file), *(path for flag, path in path_flags(args).items()
                                                  if flag != EVALUATE_FLAGS[MAIN_ROLE[kind]])])
-        if args.seed + args.episodes - 1 > SEED_RANGE[1]:
+        if args.seed + args.episodes - 1 > EPISODE_SEED_RANGE[1]:
             raise UserError(f"--seed {args.seed} with --episodes {args.episodes} runs past the largest episode seed "
-                            f"{SEED_RANGE[1]}")
+                            f"{EPISODE_SEED_RANGE[1]}")
         if args.render and args.video:
             raise UserError("--video records frames off screen; it cannot be combined with --render")
         first = load_dat(weight_file)

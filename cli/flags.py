@@ -15,7 +15,7 @@ import numpy as np
 
 from cli.config import SECTIONS, declared
 from es.settings import original_threads as threads_value  # the ER-MRL and experiment scripts' too
-from settings import SEED_RANGE, Option, expected, options, requirement
+from settings import EPISODE_SEED_RANGE, SEED_RANGE, Option, expected, options, requirement
 
 
 def converter(item: Option):
@@ -125,12 +125,21 @@ def positive_float(text: str) -> float:
     return value
 
 
-def seed_value(text: str) -> int:
+def _whole_number_in(text: str, low: int, high: int) -> int:
     value = int(text)
-    low, high = SEED_RANGE
     if not low <= value <= high:
         raise argparse.ArgumentTypeError(f"must be a whole number from {low} to {high}, got {text}")
     return value
+
+
+def seed_value(text: str) -> int:
+    """A run's seed (``SEED_RANGE``)."""
+    return _whole_number_in(text, *SEED_RANGE)
+
+
+def episode_seed_value(text: str) -> int:
+    """The first seed of evaluated episodes (``EPISODE_SEED_RANGE``)."""
+    return _whole_number_in(text, *EPISODE_SEED_RANGE)
 
 
 def non_empty(text: str) -> str:
@@ -152,4 +161,4 @@ def flag_value(text: str | None) -> bool:
 
 
 __all__ = ["add_settings", "defaults", "flag_table", "flag_value", "given", "non_empty", "positive_float",
-           "positive_int", "script_options", "seed_value", "threads_value"]
+           "positive_int", "script_options", "seed_value", "episode_seed_value", "threads_value"]

@@ -21,7 +21,7 @@ import pytest
 
 from envs import ProblemSpec, rollout
 from envs.evaluation import evaluate, format_table, trace_episode
-from es.files import save_dat
+from es.files import load_dat, save_dat
 from policies import PolicySettings
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -69,6 +69,31 @@ def test_static_table_and_json(tmp_path):
         assert "distance_mean" not in entry
         assert row.split() == [env_id, "3", f"{entry['mean']:.2f}", "±", f"{entry['std']:.2f}", "-", "-"]
     assert f"statistics: {out}" in result.stdout
+
+
+def test_the_centre_evaluations_seeds_can_be_evaluated(tmp_path):
+    """Seeds from 2**31 on (the centre's evaluation, never a training episode) up to 2**32 - 1 are
+    episode seeds, each the very episode ``rollout`` runs; one past the last is refused in one line."""
+    weights = saved_params(tmp_path, "Pendulum-v1", "static")
+    last = 2**32 - 1
+    out = tmp_path / "stats.json"
+    result = run_script("evaluate_static.py", "--environment", "Pendulum-v1", "--path_weights", str(weights),
+                        "--episodes", "2", "--seed", str(last - 1), "--json", str(out))
+    assert result.returncode == 0, result.stderr
+    entry, = json.loads(out.read_text())["environments"]
+    assert entry["seeds"] == [last - 1, last]
+    problem = ProblemSpec(("Pendulum-v1",), PolicySettings("static")).build()
+    try:
+        params = problem.policy.load({"weights": load_dat(weights)})
+        expected = [rollout(problem.envs[0], problem.policy, params, seed).total_return for seed in (last - 1, last)]
+    finally:
+        problem.close()
+    assert entry["returns"] == expected
+    refused = run_script("evaluate_static.py", "--environment", "Pendulum-v1", "--path_weights", str(weights),
+                         "--episodes", "2", "--seed", str(last))
+    assert refused.returncode == 2
+    assert refused.stderr.strip().splitlines()[-1].endswith(f"runs past the largest episode seed {last}")
+    assert "Traceback" not in refused.stderr
 
 
 def test_mujoco_ant_distance_is_the_torso_displacement():
