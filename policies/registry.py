@@ -24,7 +24,7 @@ from policies.init import INIT_CHOICES
 from policies.network import NetworkSpec
 from policies.normalised import NormalisedInputs
 from policies.pytorch_es import ConvLSTMPolicy, SmallNetPolicy
-from policies.reservoir import BOUNDS, MAX_UNITS, Hyperparameters, ReservoirFrontEnd, check_settings, head_network
+from policies.reservoir import BOUNDS, MAX_UNITS, Hyperparameters, ReservoirFrontEnd, check_evolve_start, head_network
 from policies.rules import RULES
 from policies.static import StaticPolicy
 from settings import SEED_RANGE, check, setting
@@ -104,8 +104,8 @@ class PolicySettings:
 
     def __post_init__(self) -> None:
         check(self)
-        check_settings(self.reservoir_units, self.reservoir_hyperparameters, self.reservoir_evolve,
-                       self.reservoir_seed)
+        if self.reservoir_evolve:
+            check_evolve_start(self.reservoir_hyperparameters)
 
     @property
     def reservoir_hyperparameters(self) -> Hyperparameters:
