@@ -17,7 +17,6 @@ file; observation statistics (``<name>.obs_norm.npz``, ``es.observations``) too.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -35,7 +34,6 @@ from es.files import read_json
 from es.interrupts import honour_sigint
 from es.observations import SavedStatistics, load_statistics, statistics_path
 from es.runfolder import named_file
-from report.video import check_video_path
 from settings import EPISODE_SEED_RANGE, unmet_requirement
 
 COEV_ROLES = (  # --path_coev's
@@ -86,41 +84,14 @@ def path_flags(args: argparse.Namespace) -> dict[str, str]:
 
 def check_outputs(args: argparse.Namespace, inputs: list[str]) -> None:
     """Refuse, before any episode runs, outputs that could not be written or that would replace an
-    input (the weight files) or each other."""
-    from es.outputs import JSON_SUFFIXES  # the guard of every output
+    input (the weight files), a run's file or each other (``es.outputs``, the guard of every output)."""
+    from es.outputs import JSON_SUFFIXES
     from es.outputs import check_outputs as check_paths
     from report.plots import FIGURE_SUFFIXES
     from report.video import VIDEO_SUFFIXES
 
     check_paths([(flag, path, suffixes) for flag, path, suffixes in (("--json", args.json, JSON_SUFFIXES), (
         "--plot", args.plot, FIGURE_SUFFIXES), ("--video", args.video, VIDEO_SUFFIXES)) if path is not None], inputs)
-    outputs = [(flag, path) for flag, path in (("--json", args.json), ("--plot", args.plot), ("--video", args.video))
-               if path is not None]
-    for flag, path in outputs:
-        target = Path(path)
-        if target.exists() and not target.is_file():
-            raise UserError(f"{flag} {path}: exists and is not a regular file (a folder or a device); give a file name")
-        parent = target.parent
-        if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
-            raise UserError(f"{flag} {path}: {parent} is not an existing writable folder")
-        for other in inputs:
-            if same_file(path, other):
-                raise UserError(f"{flag} {path} is the weight file {other}; writing it would destroy the input: "
-                                "give another file name")
-    for index, (flag, path) in enumerate(outputs):
-        for other_flag, other in outputs[index + 1:]:
-            if same_file(path, other):
-                raise UserError(f"{flag} and {other_flag} are the same file {path}; give each its own name")
-    if args.video is not None and (problem := check_video_path(args.video)) is not None:
-        raise UserError(f"--video {args.video}: {problem}")
-
-
-def same_file(first: str | Path, second: str | Path) -> bool:
-    """The same file once links are resolved (or the same path for files not there yet)."""
-    first, second = Path(first), Path(second)
-    if first.exists() and second.exists():
-        return os.path.samefile(first, second)
-    return first.resolve() == second.resolve()
 
 
 def write_outputs(args: argparse.Namespace, command: list[str], kind: str, reports, problem, params) -> None:

@@ -21,14 +21,6 @@ from es.files import _FILE_MODE
 VIDEO_SUFFIXES = (".mp4", ".mkv", ".mov", ".avi")  # containers ffmpeg writes H.264 into
 
 
-def check_video_path(path: str | Path) -> str | None:
-    """Why ``path`` cannot be a video, or None."""
-    suffix = Path(path).suffix.lower()
-    if suffix not in VIDEO_SUFFIXES:
-        return f"a video file must end in {', '.join(VIDEO_SUFFIXES)}, got {suffix or 'no extension'!r}"
-    return None
-
-
 class VideoRecorder(gym.Wrapper):
     """Writes the ``env.render()`` frames (render_mode="rgb_array") of the first episode to ``path``."""
 
