@@ -91,28 +91,34 @@ def _rotation(angle: float) -> tuple[int, float, float]:
 
 
 @njit(cache=True, nogil=True)
+def _screen_point(x: float, y: float, quarter: int, sine: float, cosine: float, zoom: float, tx: float,
+                  ty: float) -> tuple[float, float]:
+    """``to_screen`` of one point, ``_rotation``'s case given: the same operations on the same doubles
+    (no fastmath: nothing is fused or reordered)."""
+    if quarter == 0:
+        rx, ry = x, y
+    elif quarter == 1:
+        rx, ry = -y, x
+    elif quarter == 2:
+        rx, ry = -x, -y
+    elif quarter == 3:
+        rx, ry = y, -x
+    else:
+        rx, ry = cosine * x - sine * y, sine * x + cosine * y
+    return rx * zoom + tx, ry * zoom + ty
+
+
+@njit(cache=True, nogil=True)
 def _cull(corners: np.ndarray, quarter: int, sine: float, cosine: float, zoom: float, tx: float,
           ty: float) -> tuple[np.ndarray, np.ndarray]:
-    """``to_screen`` of polygons (K, 4, 2), then ``_visible_polygons``' two tests, in one pass:
-    the same operations on the same doubles (no fastmath: nothing is fused or reordered)."""
+    """``to_screen`` of polygons (K, 4, 2), then ``_visible_polygons``' two tests, in one pass."""
     count = corners.shape[0]
     screen = np.empty(corners.shape)
     near = np.zeros(count, dtype=np.bool_)
     representable = True  # pygame_pixels: every drawn coordinate's int() reproducible
     for k in range(count):
         for j in range(4):
-            x, y = corners[k, j, 0], corners[k, j, 1]
-            if quarter == 0:
-                rx, ry = x, y
-            elif quarter == 1:
-                rx, ry = -y, x
-            elif quarter == 2:
-                rx, ry = -x, -y
-            elif quarter == 3:
-                rx, ry = y, -x
-            else:
-                rx, ry = cosine * x - sine * y, sine * x + cosine * y
-            sx, sy = rx * zoom + tx, ry * zoom + ty
+            sx, sy = _screen_point(corners[k, j, 0], corners[k, j, 1], quarter, sine, cosine, zoom, tx, ty)
             screen[k, j, 0], screen[k, j, 1] = sx, sy
             if sx >= -_CULL_MARGIN and sx <= _W + _CULL_MARGIN and sy >= -_CULL_MARGIN and sy <= _H + _CULL_MARGIN:
                 near[k] = True
@@ -202,20 +208,64 @@ def box2d_transform(cos_sin_position: np.ndarray, local: np.ndarray) -> np.ndarr
     return np.stack(((c * vx - s * vy) + px, (s * vx + c * vy) + py), axis=-1).astype(np.float64)
 
 
-def _wheel_mark(phase: float) -> list | None:
-    """The white mark of a wheel turned by ``phase``, in the wheel's frame, or None when hidden:
-    ``Car.draw``'s own expressions (numpy's sign included), so that Box2D would get the same floats."""
+_MARK_X = car_dynamics.WHEEL_W * car_dynamics.SIZE
+_MARK_Y = car_dynamics.WHEEL_R
+
+
+@njit(cache=True, nogil=True)
+def _wheel_mark(phase: float, mark: np.ndarray) -> bool:
+    """The white mark of a wheel turned by ``phase``, in the wheel's frame, into ``mark`` (4, 2)
+    float32; False when hidden. ``Car.draw``'s own expressions (numpy's sign included), rounded to
+    float32 as pybox2d rounds the tuples it is given."""
     a1, a2 = phase, phase + 1.2  # radians
     s1, s2, c1, c2 = math.sin(a1), math.sin(a2), math.cos(a1), math.cos(a2)
     if s1 > 0 and s2 > 0:
-        return None
+        return False
     if s1 > 0:
         c1 = np.sign(c1)
     if s2 > 0:
         c2 = np.sign(c2)
-    width, radius, size = car_dynamics.WHEEL_W, car_dynamics.WHEEL_R, car_dynamics.SIZE
-    return [(-width * size, +radius * c1 * size), (+width * size, +radius * c1 * size),
-            (+width * size, +radius * c2 * size), (-width * size, +radius * c2 * size)]
+    size = car_dynamics.SIZE
+    for corner, (x, c) in enumerate(((-_MARK_X, c1), (_MARK_X, c1), (_MARK_X, c2), (-_MARK_X, c2))):
+        mark[corner, 0], mark[corner, 1] = np.float32(x), np.float32(+_MARK_Y * c * size)
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _place(local, pose, screen, points, quarter, sine, cosine, zoom, tx, ty) -> int:
+    """Corners ``local`` (n, 2) float32 of a body at ``pose`` (cos, sin, x, y) float32 into
+    ``screen[points:]``: Box2D's ``b2Mul`` in float32 (``box2d_transform``), then ``to_screen``."""
+    c, s, px, py = pose[0], pose[1], pose[2], pose[3]
+    for v in range(local.shape[0]):
+        x, y = (c * local[v, 0] - s * local[v, 1]) + px, (s * local[v, 0] + c * local[v, 1]) + py
+        screen[points + v, 0], screen[points + v, 1] = _screen_point(np.float64(x), np.float64(y), quarter, sine,
+                                                                     cosine, zoom, tx, ty)
+    return points + local.shape[0]
+
+
+@njit(cache=True, nogil=True)
+def _car_screen(owners, starts, vertices, poses, phased, phases, colors, white, quarter, sine, cosine, zoom, tx,
+                ty) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``Car.draw``'s polygons on the screen: fixture ``f`` (of body ``owners[f]``, local corners
+    ``vertices[starts[f]:starts[f + 1]]``), then, for a body with a phase, its wheel's mark.
+    ``poses``: per body (cos, sin, x, y) float32. Returns the corners (n, 2), the corner count and
+    the pixel value of each polygon."""
+    fixtures = owners.shape[0]
+    screen = np.empty((vertices.shape[0] + 4 * fixtures, 2))
+    counts, values = np.empty(2 * fixtures, dtype=np.int64), np.empty(2 * fixtures, dtype=np.int64)
+    mark = np.empty((4, 2), dtype=np.float32)
+    points, polygons = 0, 0
+    for f in range(fixtures):
+        body = owners[f]
+        local = vertices[starts[f]:starts[f + 1]]
+        points = _place(local, poses[body], screen, points, quarter, sine, cosine, zoom, tx, ty)
+        counts[polygons], values[polygons] = local.shape[0], colors[body]
+        polygons += 1
+        if phased[body] and _wheel_mark(phases[body], mark):
+            points = _place(mark, poses[body], screen, points, quarter, sine, cosine, zoom, tx, ty)
+            counts[polygons], values[polygons] = 4, white
+            polygons += 1
+    return screen[:points], counts[:polygons], values[:polygons]
 
 
 def _grass_corners() -> np.ndarray:
@@ -256,7 +306,7 @@ class FastCarRacing(stock.CarRacing):
         self._road_colors: list = []
         self._road_color_rows: np.ndarray | None = None  # the same colours as rows, when made so
         self._car_source: car_dynamics.Car | None = None
-        self._car_fixtures: list[tuple[int, np.ndarray]] = []
+        self._car_fixtures: tuple = ()  # owners, starts, local corners (_car_screen)
         self._grass_corners = _grass_corners()
         self._playfield = _playfield_corners()
         self._tile_body = car_racing_track.static_body_def()
@@ -445,18 +495,19 @@ class FastCarRacing(stock.CarRacing):
         pixels = pygame_pixels(playfield)
         covered = pixels is not None and covers_screen(pixels)
         drawn, world = self._visible_polygons(zoom, translation, angle)
-        car_corners, car_counts, car_colors = self._car_polygons(zoom, translation, angle)
+        car = self._car_polygons(zoom, translation, angle)
         world_colors = self._world_pixel_values(drawn)
         background = self._plain_pixel(self.bg_color)
-        if world_colors is None or background is None or None in car_colors or min(car_counts) < 4:
+        if world_colors is None or background is None or car is None or car[1].min() < 4:
             return None  # (pygame draws triangles with another algorithm)
+        car_corners, car_counts, car_colors = car
         parts = [world.reshape(-1, 2), car_corners] if covered else [playfield, world.reshape(-1, 2), car_corners]
         corners = np.concatenate(parts)
         if not np.all(np.abs(corners) < _COMPILED_BOUND):  # also False for NaN
             return None
         smooth = len(drawn) + (not covered)
         colors = np.concatenate([world_colors if covered else [background, *world_colors], car_colors])
-        starts = np.cumsum([0] + [4] * smooth + car_counts)
+        starts = np.concatenate([[0], np.full(smooth, 4), car_counts]).cumsum()
         integers = np.trunc(corners).astype(np.int64)
         return (background if covered else 0,  # a new stock surface is black
                 integers[:, 0].copy(), integers[:, 1].copy(), starts, colors.astype(np.int64),
@@ -562,32 +613,29 @@ class FastCarRacing(stock.CarRacing):
             values[~is_grass] = (rgb[:, 0] << 16) | (rgb[:, 1] << 8) | rgb[:, 2]  # XRGB8888 (_make_surfaces)
         return values
 
-    def _car_polygons(self, zoom, translation, angle) -> tuple[np.ndarray, list[int], list[int | None]]:
+    def _car_polygons(self, zoom, translation, angle) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """Screen corners (one polygon after the other), corner counts and pixel values of the car,
         in ``Car.draw``'s order (``gymnasium/envs/box2d/car_dynamics.py``; no skid marks): each
-        body's fixtures, a wheel's white mark right after it."""
+        body's fixtures, a wheel's white mark right after it; None if a colour is not plain RGB."""
+        bodies = self.car.drawlist
         if self._car_source is not self.car:
-            bodies = self.car.drawlist
-            self._car_fixtures = [(bodies.index(fixture.body), np.array(fixture.shape.vertices, dtype=np.float32))
-                                  for body in bodies for fixture in body.fixtures]
+            fixtures = [(index, np.array(fixture.shape.vertices, dtype=np.float32))
+                        for index, body in enumerate(bodies) for fixture in body.fixtures]
+            self._car_fixtures = (np.array([index for index, _ in fixtures], dtype=np.int64),
+                                  np.cumsum([0] + [len(corners) for _, corners in fixtures]),
+                                  np.concatenate([corners for _, corners in fixtures]).reshape(-1, 2))
             self._car_source = self.car
-        poses = [(body.transform, body) for body in self.car.drawlist]
-        pose_rows = np.array([(t.q.c, t.q.s, t.position[0], t.position[1]) for t, _ in poses], dtype=np.float32)
-        colors = [self._draw_pixel([int(c * 255) for c in body.color]) for body in self.car.drawlist]
+        poses = np.array([(t.q.c, t.q.s, t.position[0], t.position[1]) for t in (body.transform for body in bodies)],
+                         dtype=np.float32)
+        phased = ["phase" in body.__dict__ for body in bodies]
+        phases = np.array([body.phase if wheel else 0.0 for body, wheel in zip(bodies, phased)], dtype=np.float64)
+        colors = [self._draw_pixel([int(c * 255) for c in body.color]) for body in bodies]
         white = self._draw_pixel(list(car_dynamics.WHEEL_WHITE))
-        local, owners, counts, values = [], [], [], []
-        for body_index, vertices in self._car_fixtures:
-            polygons = [(vertices, colors[body_index])]
-            body = poses[body_index][1]
-            if "phase" in body.__dict__ and (mark := _wheel_mark(body.phase)) is not None:
-                polygons.append((np.array(mark, dtype=np.float32), white))
-            for points, value in polygons:
-                local.append(points)
-                owners += [body_index] * len(points)
-                counts.append(len(points))
-                values.append(value)
-        world = box2d_transform(pose_rows[owners], np.concatenate(local))
-        return to_screen(world, zoom, translation, angle), counts, values
+        if None in colors or white is None:
+            return None
+        values = np.array(colors, dtype=np.int64)
+        return _car_screen(*self._car_fixtures, poses, np.array(phased), phases, values, white,
+                           *_rotation(angle), zoom, *translation)
 
     @staticmethod
     def _draw_pixel(color: list) -> int | None:
