@@ -184,17 +184,68 @@ def touches_screen(pixels: np.ndarray) -> np.ndarray:
 
 def covers_screen(pixels: np.ndarray) -> bool:
     """Does this convex quadrilateral (4, 2) of integer vertices contain the screen with a margin?"""
+    return _covers(np.asarray(pixels, dtype=np.int64))
+
+
+@njit(cache=True, nogil=True)
+def _covers(pixels: np.ndarray) -> bool:
+    """``covers_screen``: every corner of the grown screen strictly on the same side of every edge."""
     low, high = -_FILL_MARGIN, _FILL_MARGIN
     corners = ((low, low), (_W - 1 + high, low), (_W - 1 + high, _H - 1 + high), (low, _H - 1 + high))
-    signs = set()
+    positive, negative = False, False
     for index in range(4):
-        (x1, y1), (x2, y2) = pixels[index - 1].tolist(), pixels[index].tolist()
+        previous = index - 1 if index > 0 else 3
+        x1, y1, x2, y2 = pixels[previous, 0], pixels[previous, 1], pixels[index, 0], pixels[index, 1]
         for x, y in corners:
             cross = (x2 - x1) * (y - y1) - (y2 - y1) * (x - x1)
             if cross == 0:
                 return False
-            signs.add(cross > 0)
-    return len(signs) == 1
+            positive, negative = positive or cross > 0, negative or cross < 0
+    return not (positive and negative)
+
+
+@njit(cache=True, nogil=True)
+def _playfield(corners, quarter, sine, cosine, zoom, tx, ty) -> tuple[np.ndarray, bool]:
+    """The playfield's screen corners (``to_screen``) and whether it covers the screen
+    (``covers_screen`` of ``pygame_pixels``: False when those are not reproducible)."""
+    screen, pixels = np.empty((4, 2)), np.empty((4, 2), dtype=np.int64)
+    representable = True
+    for j in range(4):
+        screen[j, 0], screen[j, 1] = _screen_point(corners[j, 0], corners[j, 1], quarter, sine, cosine, zoom, tx, ty)
+        for axis in range(2):
+            if not abs(screen[j, axis]) < 2.0 ** 31:  # also for NaN
+                representable = False
+            else:
+                pixels[j, axis] = ((np.int64(screen[j, axis]) + 32768) & 0xFFFF) - 32768  # int(), then Sint16
+    return screen, representable and _covers(pixels)
+
+
+@njit(cache=True, nogil=True)
+def _scene_arrays(playfield, covered, world, world_colors, car_corners, car_counts, car_colors, background):
+    """``_compiled_scene``'s polygons in drawing order: the playfield unless it is a fill, the world
+    (K, 4, 2), the car; as (fits, xs, ys, starts, pixel values, anti-aliased), ``fits`` False
+    where a coordinate is beyond what ``envs.pygame_raster`` reproduces (or NaN)."""
+    smooth = world.shape[0] + (0 if covered else 1)
+    polygons = smooth + car_counts.shape[0]
+    points = 4 * smooth + car_corners.shape[0]
+    xs, ys = np.empty(points, dtype=np.int64), np.empty(points, dtype=np.int64)
+    starts, colors = np.zeros(polygons + 1, dtype=np.int64), np.empty(polygons, dtype=np.int64)
+    antialiased = np.zeros(polygons, dtype=np.bool_)
+    antialiased[:smooth] = True
+    corners = np.concatenate((world.reshape(-1, 2), car_corners)) if covered else np.concatenate(
+        (playfield, world.reshape(-1, 2), car_corners))
+    for point in range(points):
+        x, y = corners[point, 0], corners[point, 1]
+        if not (abs(x) < _COMPILED_BOUND and abs(y) < _COMPILED_BOUND):
+            return False, xs, ys, starts, colors, antialiased
+        xs[point], ys[point] = np.int64(x), np.int64(y)  # truncation, as pygame
+    first = 0 if covered else 1
+    colors[0] = background
+    colors[first:first + world.shape[0]] = world_colors
+    colors[smooth:] = car_colors
+    for polygon in range(polygons):
+        starts[polygon + 1] = starts[polygon] + (4 if polygon < smooth else car_counts[polygon - smooth])
+    return True, xs, ys, starts, colors, antialiased
 
 
 def box2d_transform(cos_sin_position: np.ndarray, local: np.ndarray) -> np.ndarray:
@@ -266,6 +317,24 @@ def _car_screen(owners, starts, vertices, poses, phased, phases, colors, white, 
             counts[polygons], values[polygons] = 4, white
             polygons += 1
     return screen[:points], counts[:polygons], values[:polygons]
+
+
+@njit(cache=True, nogil=True)
+def _road_pixels(drawn, grass_count, grass, rows, values) -> bool:
+    """``values``: the pixel of each polygon ``drawn`` of grass-then-road, ``grass`` or the tile's
+    colour row as the stock's ``int(c)`` packed in XRGB8888; False if a colour is not within 0..255."""
+    for index in range(drawn.shape[0]):
+        if drawn[index] < grass_count:
+            values[index] = grass
+            continue
+        pixel = 0
+        for channel in range(3):
+            color = rows[drawn[index] - grass_count, channel]
+            if not (color > -1 and color < 256):  # NaN too
+                return False
+            pixel = (pixel << 8) | np.int64(color)  # truncation toward zero: int(c)
+        values[index] = pixel
+    return True
 
 
 def _grass_corners() -> np.ndarray:
@@ -491,27 +560,17 @@ class FastCarRacing(stock.CarRacing):
         guaranteed to match pygame."""
         if not self._compiled_drawing:
             return None
-        playfield = to_screen(self._playfield, zoom, translation, angle)
-        pixels = pygame_pixels(playfield)
-        covered = pixels is not None and covers_screen(pixels)
+        playfield, covered = _playfield(self._playfield, *_rotation(angle), zoom, *translation)
         drawn, world = self._visible_polygons(zoom, translation, angle)
         car = self._car_polygons(zoom, translation, angle)
         world_colors = self._world_pixel_values(drawn)
         background = self._plain_pixel(self.bg_color)
         if world_colors is None or background is None or car is None or car[1].min() < 4:
             return None  # (pygame draws triangles with another algorithm)
-        car_corners, car_counts, car_colors = car
-        parts = [world.reshape(-1, 2), car_corners] if covered else [playfield, world.reshape(-1, 2), car_corners]
-        corners = np.concatenate(parts)
-        if not np.all(np.abs(corners) < _COMPILED_BOUND):  # also False for NaN
+        fits, *polygons = _scene_arrays(playfield, covered, world, world_colors, *car, background)
+        if not fits:
             return None
-        smooth = len(drawn) + (not covered)
-        colors = np.concatenate([world_colors if covered else [background, *world_colors], car_colors])
-        starts = np.concatenate([[0], np.full(smooth, 4), car_counts]).cumsum()
-        integers = np.trunc(corners).astype(np.int64)
-        return (background if covered else 0,  # a new stock surface is black
-                integers[:, 0].copy(), integers[:, 1].copy(), starts, colors.astype(np.int64),
-                np.arange(len(colors)) < smooth)
+        return (background if covered else 0, *polygons)  # (a new stock surface is black)
 
     # --- the observation without the picture -------------------------------------------------
 
@@ -529,15 +588,15 @@ class FastCarRacing(stock.CarRacing):
         while True:
             target = self._spans.target()
             self._spans.record_polygons(target, True, *polygons)  # the world, flipped as the stock flips it
-            for xs, ys, value in indicators:
-                pygame_raster.draw_polygon(target, False, xs, ys, value)
+            self._spans.record_polygons(target, False, *indicators)  # the dashboard, on the flipped picture
             if not self._spans.overflowed():
                 break
         return self._spans.observe(background, *self._score_image())
 
-    def _indicator_polygons(self) -> list[tuple[np.ndarray, np.ndarray, int]] | None:
-        """The stock ``_render_indicators``'s polygons, its expressions, as pygame's integer corners
-        and pixel values; None if a corner is beyond what the compiled drawing reproduces."""
+    def _indicator_polygons(self) -> tuple | None:
+        """The stock ``_render_indicators``'s polygons, its expressions, as ``record_polygons``'
+        arguments (pygame's integer corners, pixel values, none anti-aliased: ``pygame.draw.polygon``);
+        None if a corner is beyond what the compiled drawing reproduces."""
         s, h = _W / 40.0, _H / 40.0
         car = self.car
 
@@ -564,8 +623,9 @@ class FastCarRacing(stock.CarRacing):
         if not np.all(np.abs(corners) < _COMPILED_BOUND):  # also False for NaN
             return None
         integers = corners.astype(np.int64)  # truncation, as pygame
-        return [(integers[index, :, 0], integers[index, :, 1], (color[0] << 16) | (color[1] << 8) | color[2])
-                for index, (_, color) in enumerate(kept)]
+        values = np.array([(color[0] << 16) | (color[1] << 8) | color[2] for _, color in kept], dtype=np.int64)
+        return (integers[:, :, 0].ravel(), integers[:, :, 1].ravel(), np.arange(len(kept) + 1) * 4, values,
+                np.zeros(len(kept), dtype=np.bool_))
 
     def _score_image(self) -> tuple[np.ndarray, int, int]:
         """The score's pixels as the stock blit writes them, and where: made once per distinct text."""
@@ -592,21 +652,19 @@ class FastCarRacing(stock.CarRacing):
         grass_count = len(self._grass_corners)
         is_grass = drawn < grass_count
         values = np.empty(len(drawn), dtype=np.int64)
-        if is_grass.any():
-            grass = self._plain_pixel(self.grass_color)
-            if grass is None:
-                return None
-            values[is_grass] = grass
+        grass = self._plain_pixel(self.grass_color) if len(drawn) and drawn[0] < grass_count else 0  # (sorted)
+        if grass is None:
+            return None
+        if self._road_color_rows is not None:  # the tiles' colours are its rows (envs.car_racing_track)
+            return values if _road_pixels(drawn, grass_count, grass, self._road_color_rows, values) else None
+        values[is_grass] = grass
         road_index = drawn[~is_grass] - grass_count
         if len(road_index):
-            if self._road_color_rows is not None:  # the tiles' colours are its rows (envs.car_racing_track)
-                colors = self._road_color_rows[road_index]
-            else:
-                try:
-                    road = [self._road_colors[index] for index in road_index.tolist()]
-                    colors = np.array(road, dtype=np.float64)  # read now: visited tiles change colour
-                except (TypeError, ValueError):
-                    return None
+            try:
+                road = [self._road_colors[index] for index in road_index.tolist()]
+                colors = np.array(road, dtype=np.float64)  # read now: visited tiles change colour
+            except (TypeError, ValueError):
+                return None
             if colors.shape != (len(road_index), 3) or not np.all((colors > -1) & (colors < 256)):  # NaN too
                 return None
             rgb = np.trunc(colors).astype(np.int64)  # the stock's int(c): 0..255
