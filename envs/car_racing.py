@@ -19,6 +19,8 @@ touch them) and computes the same picture with less work:
   score's pixels are those its blit writes, and ``envs.car_racing_observation`` computes
   ``smoothscale``'s 96 x 96 result from the spans; the car's corners come from Box2D's transform
   computed in float32 as Box2D does (``box2d_transform``). ``self.surf`` is then not updated;
+- per frame, the culling, the car's corners (``_car_screen``), the playfield test and the arrays
+  handed to the drawing are each one numba pass, with the same double and float32 operations;
 - where ``smoothscale``'s backend is not SSE2 or NEON, the world is drawn by the same compiled
   functions straight into the flipped frame, the dashboard and score by pygame, and the picture
   shrunk by ``smoothscale`` itself;
