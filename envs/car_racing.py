@@ -19,6 +19,8 @@ touch them) and computes the same picture with less work:
   score's pixels are those its blit writes, and ``envs.car_racing_observation`` computes
   ``smoothscale``'s 96 x 96 result from the spans; the car's corners come from Box2D's transform
   computed in float32 as Box2D does (``box2d_transform``). ``self.surf`` is then not updated;
+- per frame, the culling, the car's corners (``_car_screen``), the playfield test and the arrays
+  handed to the drawing are each one numba pass, with the same double and float32 operations;
 - where ``smoothscale``'s backend is not SSE2 or NEON, the world is drawn by the same compiled
   functions straight into the flipped frame, the dashboard and score by pygame, and the picture
   shrunk by ``smoothscale`` itself;
@@ -91,28 +93,34 @@ def _rotation(angle: float) -> tuple[int, float, float]:
 
 
 @njit(cache=True, nogil=True)
+def _screen_point(x: float, y: float, quarter: int, sine: float, cosine: float, zoom: float, tx: float,
+                  ty: float) -> tuple[float, float]:
+    """``to_screen`` of one point, ``_rotation``'s case given: the same operations on the same doubles
+    (no fastmath: nothing is fused or reordered)."""
+    if quarter == 0:
+        rx, ry = x, y
+    elif quarter == 1:
+        rx, ry = -y, x
+    elif quarter == 2:
+        rx, ry = -x, -y
+    elif quarter == 3:
+        rx, ry = y, -x
+    else:
+        rx, ry = cosine * x - sine * y, sine * x + cosine * y
+    return rx * zoom + tx, ry * zoom + ty
+
+
+@njit(cache=True, nogil=True)
 def _cull(corners: np.ndarray, quarter: int, sine: float, cosine: float, zoom: float, tx: float,
           ty: float) -> tuple[np.ndarray, np.ndarray]:
-    """``to_screen`` of polygons (K, 4, 2), then ``_visible_polygons``' two tests, in one pass:
-    the same operations on the same doubles (no fastmath: nothing is fused or reordered)."""
+    """``to_screen`` of polygons (K, 4, 2), then ``_visible_polygons``' two tests, in one pass."""
     count = corners.shape[0]
     screen = np.empty(corners.shape)
     near = np.zeros(count, dtype=np.bool_)
     representable = True  # pygame_pixels: every drawn coordinate's int() reproducible
     for k in range(count):
         for j in range(4):
-            x, y = corners[k, j, 0], corners[k, j, 1]
-            if quarter == 0:
-                rx, ry = x, y
-            elif quarter == 1:
-                rx, ry = -y, x
-            elif quarter == 2:
-                rx, ry = -x, -y
-            elif quarter == 3:
-                rx, ry = y, -x
-            else:
-                rx, ry = cosine * x - sine * y, sine * x + cosine * y
-            sx, sy = rx * zoom + tx, ry * zoom + ty
+            sx, sy = _screen_point(corners[k, j, 0], corners[k, j, 1], quarter, sine, cosine, zoom, tx, ty)
             screen[k, j, 0], screen[k, j, 1] = sx, sy
             if sx >= -_CULL_MARGIN and sx <= _W + _CULL_MARGIN and sy >= -_CULL_MARGIN and sy <= _H + _CULL_MARGIN:
                 near[k] = True
@@ -178,17 +186,68 @@ def touches_screen(pixels: np.ndarray) -> np.ndarray:
 
 def covers_screen(pixels: np.ndarray) -> bool:
     """Does this convex quadrilateral (4, 2) of integer vertices contain the screen with a margin?"""
+    return _covers(np.asarray(pixels, dtype=np.int64))
+
+
+@njit(cache=True, nogil=True)
+def _covers(pixels: np.ndarray) -> bool:
+    """``covers_screen``: every corner of the grown screen strictly on the same side of every edge."""
     low, high = -_FILL_MARGIN, _FILL_MARGIN
     corners = ((low, low), (_W - 1 + high, low), (_W - 1 + high, _H - 1 + high), (low, _H - 1 + high))
-    signs = set()
+    positive, negative = False, False
     for index in range(4):
-        (x1, y1), (x2, y2) = pixels[index - 1].tolist(), pixels[index].tolist()
+        previous = index - 1 if index > 0 else 3
+        x1, y1, x2, y2 = pixels[previous, 0], pixels[previous, 1], pixels[index, 0], pixels[index, 1]
         for x, y in corners:
             cross = (x2 - x1) * (y - y1) - (y2 - y1) * (x - x1)
             if cross == 0:
                 return False
-            signs.add(cross > 0)
-    return len(signs) == 1
+            positive, negative = positive or cross > 0, negative or cross < 0
+    return not (positive and negative)
+
+
+@njit(cache=True, nogil=True)
+def _playfield(corners, quarter, sine, cosine, zoom, tx, ty) -> tuple[np.ndarray, bool]:
+    """The playfield's screen corners (``to_screen``) and whether it covers the screen
+    (``covers_screen`` of ``pygame_pixels``: False when those are not reproducible)."""
+    screen, pixels = np.empty((4, 2)), np.empty((4, 2), dtype=np.int64)
+    representable = True
+    for j in range(4):
+        screen[j, 0], screen[j, 1] = _screen_point(corners[j, 0], corners[j, 1], quarter, sine, cosine, zoom, tx, ty)
+        for axis in range(2):
+            if not abs(screen[j, axis]) < 2.0 ** 31:  # also for NaN
+                representable = False
+            else:
+                pixels[j, axis] = ((np.int64(screen[j, axis]) + 32768) & 0xFFFF) - 32768  # int(), then Sint16
+    return screen, representable and _covers(pixels)
+
+
+@njit(cache=True, nogil=True)
+def _scene_arrays(playfield, covered, world, world_colors, car_corners, car_counts, car_colors, background):
+    """``_compiled_scene``'s polygons in drawing order: the playfield unless it is a fill, the world
+    (K, 4, 2), the car; as (fits, xs, ys, starts, pixel values, anti-aliased), ``fits`` False
+    where a coordinate is beyond what ``envs.pygame_raster`` reproduces (or NaN)."""
+    smooth = world.shape[0] + (0 if covered else 1)
+    polygons = smooth + car_counts.shape[0]
+    points = 4 * smooth + car_corners.shape[0]
+    xs, ys = np.empty(points, dtype=np.int64), np.empty(points, dtype=np.int64)
+    starts, colors = np.zeros(polygons + 1, dtype=np.int64), np.empty(polygons, dtype=np.int64)
+    antialiased = np.zeros(polygons, dtype=np.bool_)
+    antialiased[:smooth] = True
+    corners = np.concatenate((world.reshape(-1, 2), car_corners)) if covered else np.concatenate(
+        (playfield, world.reshape(-1, 2), car_corners))
+    for point in range(points):
+        x, y = corners[point, 0], corners[point, 1]
+        if not (abs(x) < _COMPILED_BOUND and abs(y) < _COMPILED_BOUND):
+            return False, xs, ys, starts, colors, antialiased
+        xs[point], ys[point] = np.int64(x), np.int64(y)  # truncation, as pygame
+    first = 0 if covered else 1
+    colors[0] = background
+    colors[first:first + world.shape[0]] = world_colors
+    colors[smooth:] = car_colors
+    for polygon in range(polygons):
+        starts[polygon + 1] = starts[polygon] + (4 if polygon < smooth else car_counts[polygon - smooth])
+    return True, xs, ys, starts, colors, antialiased
 
 
 def box2d_transform(cos_sin_position: np.ndarray, local: np.ndarray) -> np.ndarray:
@@ -202,20 +261,82 @@ def box2d_transform(cos_sin_position: np.ndarray, local: np.ndarray) -> np.ndarr
     return np.stack(((c * vx - s * vy) + px, (s * vx + c * vy) + py), axis=-1).astype(np.float64)
 
 
-def _wheel_mark(phase: float) -> list | None:
-    """The white mark of a wheel turned by ``phase``, in the wheel's frame, or None when hidden:
-    ``Car.draw``'s own expressions (numpy's sign included), so that Box2D would get the same floats."""
+_MARK_X = car_dynamics.WHEEL_W * car_dynamics.SIZE
+_MARK_Y = car_dynamics.WHEEL_R
+
+
+@njit(cache=True, nogil=True)
+def _wheel_mark(phase: float, mark: np.ndarray) -> bool:
+    """The white mark of a wheel turned by ``phase``, in the wheel's frame, into ``mark`` (4, 2)
+    float32; False when hidden. ``Car.draw``'s own expressions (numpy's sign included), rounded to
+    float32 as pybox2d rounds the tuples it is given."""
     a1, a2 = phase, phase + 1.2  # radians
     s1, s2, c1, c2 = math.sin(a1), math.sin(a2), math.cos(a1), math.cos(a2)
     if s1 > 0 and s2 > 0:
-        return None
+        return False
     if s1 > 0:
         c1 = np.sign(c1)
     if s2 > 0:
         c2 = np.sign(c2)
-    width, radius, size = car_dynamics.WHEEL_W, car_dynamics.WHEEL_R, car_dynamics.SIZE
-    return [(-width * size, +radius * c1 * size), (+width * size, +radius * c1 * size),
-            (+width * size, +radius * c2 * size), (-width * size, +radius * c2 * size)]
+    size = car_dynamics.SIZE
+    for corner, (x, c) in enumerate(((-_MARK_X, c1), (_MARK_X, c1), (_MARK_X, c2), (-_MARK_X, c2))):
+        mark[corner, 0], mark[corner, 1] = np.float32(x), np.float32(+_MARK_Y * c * size)
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _place(local, pose, screen, points, quarter, sine, cosine, zoom, tx, ty) -> int:
+    """Corners ``local`` (n, 2) float32 of a body at ``pose`` (cos, sin, x, y) float32 into
+    ``screen[points:]``: Box2D's ``b2Mul`` in float32 (``box2d_transform``), then ``to_screen``."""
+    c, s, px, py = pose[0], pose[1], pose[2], pose[3]
+    for v in range(local.shape[0]):
+        x, y = (c * local[v, 0] - s * local[v, 1]) + px, (s * local[v, 0] + c * local[v, 1]) + py
+        screen[points + v, 0], screen[points + v, 1] = _screen_point(np.float64(x), np.float64(y), quarter, sine,
+                                                                     cosine, zoom, tx, ty)
+    return points + local.shape[0]
+
+
+@njit(cache=True, nogil=True)
+def _car_screen(owners, starts, vertices, poses, phased, phases, colors, white, quarter, sine, cosine, zoom, tx,
+                ty) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``Car.draw``'s polygons on the screen: fixture ``f`` (of body ``owners[f]``, local corners
+    ``vertices[starts[f]:starts[f + 1]]``), then, for a body with a phase, its wheel's mark.
+    ``poses``: per body (cos, sin, x, y) float32. Returns the corners (n, 2), the corner count and
+    the pixel value of each polygon."""
+    fixtures = owners.shape[0]
+    screen = np.empty((vertices.shape[0] + 4 * fixtures, 2))
+    counts, values = np.empty(2 * fixtures, dtype=np.int64), np.empty(2 * fixtures, dtype=np.int64)
+    mark = np.empty((4, 2), dtype=np.float32)
+    points, polygons = 0, 0
+    for f in range(fixtures):
+        body = owners[f]
+        local = vertices[starts[f]:starts[f + 1]]
+        points = _place(local, poses[body], screen, points, quarter, sine, cosine, zoom, tx, ty)
+        counts[polygons], values[polygons] = local.shape[0], colors[body]
+        polygons += 1
+        if phased[body] and _wheel_mark(phases[body], mark):
+            points = _place(mark, poses[body], screen, points, quarter, sine, cosine, zoom, tx, ty)
+            counts[polygons], values[polygons] = 4, white
+            polygons += 1
+    return screen[:points], counts[:polygons], values[:polygons]
+
+
+@njit(cache=True, nogil=True)
+def _road_pixels(drawn, grass_count, grass, rows, values) -> bool:
+    """``values``: the pixel of each polygon ``drawn`` of grass-then-road, ``grass`` or the tile's
+    colour row as the stock's ``int(c)`` packed in XRGB8888; False if a colour is not within 0..255."""
+    for index in range(drawn.shape[0]):
+        if drawn[index] < grass_count:
+            values[index] = grass
+            continue
+        pixel = 0
+        for channel in range(3):
+            color = rows[drawn[index] - grass_count, channel]
+            if not (color > -1 and color < 256):  # NaN too
+                return False
+            pixel = (pixel << 8) | np.int64(color)  # truncation toward zero: int(c)
+        values[index] = pixel
+    return True
 
 
 def _grass_corners() -> np.ndarray:
@@ -256,7 +377,7 @@ class FastCarRacing(stock.CarRacing):
         self._road_colors: list = []
         self._road_color_rows: np.ndarray | None = None  # the same colours as rows, when made so
         self._car_source: car_dynamics.Car | None = None
-        self._car_fixtures: list[tuple[int, np.ndarray]] = []
+        self._car_fixtures: tuple = ()  # owners, starts, local corners (_car_screen)
         self._grass_corners = _grass_corners()
         self._playfield = _playfield_corners()
         self._tile_body = car_racing_track.static_body_def()
@@ -441,26 +562,17 @@ class FastCarRacing(stock.CarRacing):
         guaranteed to match pygame."""
         if not self._compiled_drawing:
             return None
-        playfield = to_screen(self._playfield, zoom, translation, angle)
-        pixels = pygame_pixels(playfield)
-        covered = pixels is not None and covers_screen(pixels)
+        playfield, covered = _playfield(self._playfield, *_rotation(angle), zoom, *translation)
         drawn, world = self._visible_polygons(zoom, translation, angle)
-        car_corners, car_counts, car_colors = self._car_polygons(zoom, translation, angle)
+        car = self._car_polygons(zoom, translation, angle)
         world_colors = self._world_pixel_values(drawn)
         background = self._plain_pixel(self.bg_color)
-        if world_colors is None or background is None or None in car_colors or min(car_counts) < 4:
+        if world_colors is None or background is None or car is None or car[1].min() < 4:
             return None  # (pygame draws triangles with another algorithm)
-        parts = [world.reshape(-1, 2), car_corners] if covered else [playfield, world.reshape(-1, 2), car_corners]
-        corners = np.concatenate(parts)
-        if not np.all(np.abs(corners) < _COMPILED_BOUND):  # also False for NaN
+        fits, *polygons = _scene_arrays(playfield, covered, world, world_colors, *car, background)
+        if not fits:
             return None
-        smooth = len(drawn) + (not covered)
-        colors = np.concatenate([world_colors if covered else [background, *world_colors], car_colors])
-        starts = np.cumsum([0] + [4] * smooth + car_counts)
-        integers = np.trunc(corners).astype(np.int64)
-        return (background if covered else 0,  # a new stock surface is black
-                integers[:, 0].copy(), integers[:, 1].copy(), starts, colors.astype(np.int64),
-                np.arange(len(colors)) < smooth)
+        return (background if covered else 0, *polygons)  # (a new stock surface is black)
 
     # --- the observation without the picture -------------------------------------------------
 
@@ -478,15 +590,15 @@ class FastCarRacing(stock.CarRacing):
         while True:
             target = self._spans.target()
             self._spans.record_polygons(target, True, *polygons)  # the world, flipped as the stock flips it
-            for xs, ys, value in indicators:
-                pygame_raster.draw_polygon(target, False, xs, ys, value)
+            self._spans.record_polygons(target, False, *indicators)  # the dashboard, on the flipped picture
             if not self._spans.overflowed():
                 break
         return self._spans.observe(background, *self._score_image())
 
-    def _indicator_polygons(self) -> list[tuple[np.ndarray, np.ndarray, int]] | None:
-        """The stock ``_render_indicators``'s polygons, its expressions, as pygame's integer corners
-        and pixel values; None if a corner is beyond what the compiled drawing reproduces."""
+    def _indicator_polygons(self) -> tuple | None:
+        """The stock ``_render_indicators``'s polygons, its expressions, as ``record_polygons``'
+        arguments (pygame's integer corners, pixel values, none anti-aliased: ``pygame.draw.polygon``);
+        None if a corner is beyond what the compiled drawing reproduces."""
         s, h = _W / 40.0, _H / 40.0
         car = self.car
 
@@ -513,8 +625,9 @@ class FastCarRacing(stock.CarRacing):
         if not np.all(np.abs(corners) < _COMPILED_BOUND):  # also False for NaN
             return None
         integers = corners.astype(np.int64)  # truncation, as pygame
-        return [(integers[index, :, 0], integers[index, :, 1], (color[0] << 16) | (color[1] << 8) | color[2])
-                for index, (_, color) in enumerate(kept)]
+        values = np.array([(color[0] << 16) | (color[1] << 8) | color[2] for _, color in kept], dtype=np.int64)
+        return (integers[:, :, 0].ravel(), integers[:, :, 1].ravel(), np.arange(len(kept) + 1) * 4, values,
+                np.zeros(len(kept), dtype=np.bool_))
 
     def _score_image(self) -> tuple[np.ndarray, int, int]:
         """The score's pixels as the stock blit writes them, and where: made once per distinct text."""
@@ -541,53 +654,48 @@ class FastCarRacing(stock.CarRacing):
         grass_count = len(self._grass_corners)
         is_grass = drawn < grass_count
         values = np.empty(len(drawn), dtype=np.int64)
-        if is_grass.any():
-            grass = self._plain_pixel(self.grass_color)
-            if grass is None:
-                return None
-            values[is_grass] = grass
+        grass = self._plain_pixel(self.grass_color) if len(drawn) and drawn[0] < grass_count else 0  # (sorted)
+        if grass is None:
+            return None
+        if self._road_color_rows is not None:  # the tiles' colours are its rows (envs.car_racing_track)
+            return values if _road_pixels(drawn, grass_count, grass, self._road_color_rows, values) else None
+        values[is_grass] = grass
         road_index = drawn[~is_grass] - grass_count
         if len(road_index):
-            if self._road_color_rows is not None:  # the tiles' colours are its rows (envs.car_racing_track)
-                colors = self._road_color_rows[road_index]
-            else:
-                try:
-                    road = [self._road_colors[index] for index in road_index.tolist()]
-                    colors = np.array(road, dtype=np.float64)  # read now: visited tiles change colour
-                except (TypeError, ValueError):
-                    return None
+            try:
+                road = [self._road_colors[index] for index in road_index.tolist()]
+                colors = np.array(road, dtype=np.float64)  # read now: visited tiles change colour
+            except (TypeError, ValueError):
+                return None
             if colors.shape != (len(road_index), 3) or not np.all((colors > -1) & (colors < 256)):  # NaN too
                 return None
             rgb = np.trunc(colors).astype(np.int64)  # the stock's int(c): 0..255
             values[~is_grass] = (rgb[:, 0] << 16) | (rgb[:, 1] << 8) | rgb[:, 2]  # XRGB8888 (_make_surfaces)
         return values
 
-    def _car_polygons(self, zoom, translation, angle) -> tuple[np.ndarray, list[int], list[int | None]]:
+    def _car_polygons(self, zoom, translation, angle) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """Screen corners (one polygon after the other), corner counts and pixel values of the car,
         in ``Car.draw``'s order (``gymnasium/envs/box2d/car_dynamics.py``; no skid marks): each
-        body's fixtures, a wheel's white mark right after it."""
+        body's fixtures, a wheel's white mark right after it; None if a colour is not plain RGB."""
+        bodies = self.car.drawlist
         if self._car_source is not self.car:
-            bodies = self.car.drawlist
-            self._car_fixtures = [(bodies.index(fixture.body), np.array(fixture.shape.vertices, dtype=np.float32))
-                                  for body in bodies for fixture in body.fixtures]
+            fixtures = [(index, np.array(fixture.shape.vertices, dtype=np.float32))
+                        for index, body in enumerate(bodies) for fixture in body.fixtures]
+            self._car_fixtures = (np.array([index for index, _ in fixtures], dtype=np.int64),
+                                  np.cumsum([0] + [len(corners) for _, corners in fixtures]),
+                                  np.concatenate([corners for _, corners in fixtures]).reshape(-1, 2))
             self._car_source = self.car
-        poses = [(body.transform, body) for body in self.car.drawlist]
-        pose_rows = np.array([(t.q.c, t.q.s, t.position[0], t.position[1]) for t, _ in poses], dtype=np.float32)
-        colors = [self._draw_pixel([int(c * 255) for c in body.color]) for body in self.car.drawlist]
+        poses = np.array([(t.q.c, t.q.s, t.position[0], t.position[1]) for t in (body.transform for body in bodies)],
+                         dtype=np.float32)
+        phased = ["phase" in body.__dict__ for body in bodies]
+        phases = np.array([body.phase if wheel else 0.0 for body, wheel in zip(bodies, phased)], dtype=np.float64)
+        colors = [self._draw_pixel([int(c * 255) for c in body.color]) for body in bodies]
         white = self._draw_pixel(list(car_dynamics.WHEEL_WHITE))
-        local, owners, counts, values = [], [], [], []
-        for body_index, vertices in self._car_fixtures:
-            polygons = [(vertices, colors[body_index])]
-            body = poses[body_index][1]
-            if "phase" in body.__dict__ and (mark := _wheel_mark(body.phase)) is not None:
-                polygons.append((np.array(mark, dtype=np.float32), white))
-            for points, value in polygons:
-                local.append(points)
-                owners += [body_index] * len(points)
-                counts.append(len(points))
-                values.append(value)
-        world = box2d_transform(pose_rows[owners], np.concatenate(local))
-        return to_screen(world, zoom, translation, angle), counts, values
+        if None in colors or white is None:
+            return None
+        values = np.array(colors, dtype=np.int64)
+        return _car_screen(*self._car_fixtures, poses, np.array(phased), phases, values, white,
+                           *_rotation(angle), zoom, *translation)
 
     @staticmethod
     def _draw_pixel(color: list) -> int | None:
