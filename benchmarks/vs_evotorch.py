@@ -4,6 +4,8 @@
     python benchmarks/vs_evotorch.py --environment CartPole-v1 --seeds 5 --popsize 16 --generations 30
     python benchmarks/vs_evotorch.py --environment HalfCheetah-v5 --seeds 3 --popsize 16 --generations 5
     python benchmarks/vs_evotorch.py --strategies openai,pgpe,snes,sep_cma_es ...
+    python benchmarks/vs_evotorch.py --strategies pgpe --popsize 100 --radius 2.25 --clipup_max_speed 0.15 \
+        --pgpe_lr 0.1125 --generations 50    # EvoTorch's CartPole example's PGPE settings
 
 Both tools evolve the same network, obs -> 128 -> 64 -> actions, no biases, tanh hidden layers, the
 output argmax-ed (Discrete) or clipped (Box) (policies/network.py; EvoTorch's GymNE with the same layer
@@ -26,8 +28,11 @@ then "not solved" if half of them are).
 The counterparts (COUNTERPARTS): this tool's ``openai`` (OpenAI-ES: mirrored sampling, centred ranks
 standardised, SGD step lr / (N sigma) * sum F eps) is EvoTorch's PGPE with sigma frozen
 (stdev_learning_rate 0), centred ranking and plain gradient ascent at center_learning_rate
-lr / (sigma^2 * std of the centred ranks): the same first step; ``pgpe`` is PGPE with ClipUp, ``snes``
-SNES, ``cma_es`` / ``sep_cma_es`` CMA-ES full / separable, each with sigma and population as given.
+lr / (sigma^2 * std of the centred ranks): the same first step; ``pgpe`` is PGPE with ClipUp, given the
+same maximum speed and step as this tool (--clipup_max_speed, --pgpe_lr; by default this tool's defaults
+for the run's parameter count) and this tool's sigma learning rate and largest sigma change; ``snes``
+SNES, ``cma_es`` / ``sep_cma_es`` CMA-ES full / separable, each with sigma and population as given
+(--radius gives sigma as EvoTorch's radius_init does: sigma = radius / sqrt(parameters)).
 A strategy this tool does not have (``--strategy`` of the training scripts) is reported as such.
 
 Targets (issue 22): per environment step every strategy >= 1.5x its EvoTorch counterpart; on
