@@ -4,6 +4,8 @@
     python benchmarks/vs_evotorch.py --environment CartPole-v1 --seeds 5 --popsize 16 --generations 30
     python benchmarks/vs_evotorch.py --environment HalfCheetah-v5 --seeds 3 --popsize 16 --generations 5
     python benchmarks/vs_evotorch.py --strategies openai,pgpe,snes,sep_cma_es ...
+    python benchmarks/vs_evotorch.py --strategies pgpe --popsize 100 --radius 2.25 --clipup_max_speed 0.15 \
+        --pgpe_lr 0.1125 --generations 50    # EvoTorch's CartPole example's PGPE settings
 
 Both tools evolve the same network, obs -> 128 -> 64 -> actions, no biases, tanh hidden layers, the
 output argmax-ed (Discrete) or clipped (Box) (policies/network.py; EvoTorch's GymNE with the same layer
@@ -26,8 +28,11 @@ then "not solved" if half of them are).
 The counterparts (COUNTERPARTS): this tool's ``openai`` (OpenAI-ES: mirrored sampling, centred ranks
 standardised, SGD step lr / (N sigma) * sum F eps) is EvoTorch's PGPE with sigma frozen
 (stdev_learning_rate 0), centred ranking and plain gradient ascent at center_learning_rate
-lr / (sigma^2 * std of the centred ranks): the same first step; ``pgpe`` is PGPE with ClipUp, ``snes``
-SNES, ``cma_es`` / ``sep_cma_es`` CMA-ES full / separable, each with sigma and population as given.
+lr / (sigma^2 * std of the centred ranks): the same first step; ``pgpe`` is PGPE with ClipUp, given the
+same maximum speed and step as this tool (--clipup_max_speed, --pgpe_lr; by default this tool's defaults
+for the run's parameter count) and this tool's sigma learning rate and largest sigma change; ``snes``
+SNES, ``cma_es`` / ``sep_cma_es`` CMA-ES full / separable, each with sigma and population as given
+(--radius gives sigma as EvoTorch's radius_init does: sigma = radius / sqrt(parameters)).
 A strategy this tool does not have (``--strategy`` of the training scripts) is reported as such.
 
 Targets (issue 22): per environment step every strategy >= 1.5x its EvoTorch counterpart; on
@@ -54,6 +59,7 @@ from envs import ProblemSpec
 from es.loop import Trainer
 from es.runfolder import RunFolder
 from es.settings import ESSettings, RunSettings
+from es.strategies.pgpe import default_max_speed
 from policies.network import HIDDEN
 
 INSTALL_HINT = "pip install -r requirements-bench.txt"
@@ -84,7 +90,14 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--popsize", type=int, default=16)
     parser.add_argument("--generations", type=int, default=30, help="the most generations of a run")
     parser.add_argument("--sigma", type=float, default=ESSettings.sigma)
-    parser.add_argument("--lr", type=float, default=ESSettings.lr)
+    parser.add_argument("--lr", type=float, default=ESSettings.lr, help="openai's learning rate")
+    parser.add_argument("--radius", type=float, default=None,
+                        help="the initial sigma given as the norm of the sigma vector, EvoTorch's radius_init: "
+                             "sigma = radius / sqrt(parameters) for both tools (instead of --sigma)")
+    parser.add_argument("--clipup_max_speed", type=float, default=None,
+                        help="pgpe: ClipUp's maximum speed (default: this tool's, sigma sqrt(parameters) / 15)")
+    parser.add_argument("--pgpe_lr", type=float, default=None,
+                        help="pgpe: the centre's step size (default: this tool's, --clipup_max_speed / 2)")
     parser.add_argument("--target", type=float, default=None,
                         help="centre return that counts as solved (default: 475 on CartPole-v1, none elsewhere)")
     args = parser.parse_args(argv)
@@ -102,11 +115,15 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
 def our_settings(strategy: str, args: argparse.Namespace) -> ESSettings | None:
     """The ES settings of ``strategy``, or None where this version of the tool does not have it."""
     names = {field.name for field in dataclasses.fields(ESSettings)}
-    values = {"popsize": args.popsize, "sigma": args.sigma, "lr": args.lr}
+    values = {"popsize": args.popsize, "sigma": args.sigma}
     if "strategy" in names:
         values["strategy"] = strategy
     elif strategy != "openai":
         return None
+    if strategy == "openai":
+        values["lr"] = args.lr
+    if strategy == "pgpe":
+        values.update(pgpe_lr=args.pgpe_lr, clipup_max_speed=args.clipup_max_speed)
     try:
         return ESSettings(**values)
     except ValueError:
@@ -172,10 +189,13 @@ def openai_counterpart(problem, args, centre):
 def pgpe_counterpart(problem, args, centre):
     from evotorch.algorithms import PGPE
 
-    # ClipUp (Toklu et al. 2020): step size = max speed / 2; PGPE's sigma learning rate 0.1
-    return PGPE(problem, popsize=args.popsize, center_learning_rate=0.075, stdev_learning_rate=0.1,
-                stdev_init=args.sigma, optimizer="clipup", optimizer_config={"max_speed": 0.15},
-                ranking_method="centered", symmetric=True, center_init=centre)
+    # ClipUp (Toklu et al. 2020) with the same step size and maximum speed as this tool's run; sigma's
+    # learning rate and largest change are this tool's defaults, which are EvoTorch's example values
+    es = ESSettings(strategy="pgpe")
+    return PGPE(problem, popsize=args.popsize, center_learning_rate=args.pgpe_lr, stdev_learning_rate=es.pgpe_sigma_lr,
+                stdev_init=args.sigma, optimizer="clipup", optimizer_config={"max_speed": args.clipup_max_speed},
+                stdev_max_change=es.pgpe_max_sigma_change, ranking_method="centered", symmetric=True,
+                center_init=centre)
 
 
 def snes_counterpart(problem, args, centre):
@@ -255,7 +275,9 @@ def compare(strategy: str, args: argparse.Namespace) -> None:
         for tool in order:
             (ours if tool == "ours" else theirs).append(run_ours(es, args, seed) if tool == "ours"
                                                         else run_evotorch(strategy, args, seed))
-    print(f"\n## {strategy} ({args.environment}, popsize {args.popsize}, at most {args.generations} generations)")
+    extra = f", ClipUp max speed {args.clipup_max_speed:g}, step {args.pgpe_lr:g}" if strategy == "pgpe" else ""
+    print(f"\n## {strategy} ({args.environment}, popsize {args.popsize}, sigma {args.sigma:.6g}{extra}, "
+          f"at most {args.generations} generations)")
     print("| seed | tool | generations | env steps | steps/s | steps to solve | final centre return |")
     print("|---|---|---|---|---|---|---|")
     for mine, other in zip(ours, theirs):
@@ -275,6 +297,19 @@ def compare(strategy: str, args: argparse.Namespace) -> None:
           f"EvoTorch {statistics.median(r.final_centre for r in theirs):.1f}")
 
 
+def resolve_defaults(args: argparse.Namespace) -> None:
+    """sigma from --radius, and PGPE's maximum speed and step where not given: this tool's defaults, which
+    depend on the parameter count, given to both tools as numbers."""
+    parameters = initial_centre(args, 0).size
+    if args.radius is not None:
+        args.sigma = args.radius / parameters ** 0.5
+        print(f"radius {args.radius:g} over {parameters:,} parameters: sigma {args.sigma:.6g}")
+    if args.clipup_max_speed is None:
+        args.clipup_max_speed = default_max_speed(args.sigma, parameters)
+    if args.pgpe_lr is None:
+        args.pgpe_lr = args.clipup_max_speed / 2
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
     try:
@@ -286,6 +321,7 @@ def main(argv: list[str] | None = None) -> int:
 
     logging.getLogger("evotorch").setLevel(logging.WARNING)
     print(f"EvoTorch {evotorch.__version__}; one process per tool; network {evotorch_network()}")
+    resolve_defaults(args)
     for strategy in args.strategies.split(","):
         compare(strategy, args)
     return 0

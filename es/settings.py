@@ -89,8 +89,10 @@ class ESSettings:
                                        "ascent)")
     pgpe_lr: float | None = setting(None, low=0, low_open=True, requires=("strategy", "pgpe"), group=STRATEGY,
                                     shown_default="--clipup_max_speed / 2", help="PGPE's centre step size")
-    clipup_max_speed: float = setting(0.15, low=0, low_open=True, requires=("strategy", "pgpe"), group=STRATEGY,
-                                      help="ClipUp's maximum speed (the velocity's largest norm)")
+    clipup_max_speed: float | None = setting(None, low=0, low_open=True, requires=("strategy", "pgpe"),
+                                             group=STRATEGY, shown_default="--sigma * sqrt(d) / 15, d the parameters",
+                                             help="ClipUp's maximum speed (the velocity's largest norm); by default "
+                                                  "the ClipUp paper's rule: initial radius sigma sqrt(d) = 15 x it")
     clipup_momentum: float = setting(0.9, low=0, high=1, high_open=True, group=STRATEGY,
                                      requires=(("strategy", "pgpe"), ("pgpe_optimizer", "clipup")),
                                      help="ClipUp's momentum (the velocity's decay)")

@@ -21,6 +21,7 @@ EXTRAS = {
     "tensorboard": ("tensorboard",),
     "strategies": ("cmaes",),
     "stats": ("rliable", "arch", "pandas"),
+    "bench": ("evotorch",),
 }
 
 

@@ -110,7 +110,8 @@ def test_a_population_is_what_the_wire_protocol_can_carry(name):
 def test_every_strategy_climbs_a_sphere(name):
     needs_extra(name)
     noise = NoiseTable.create(seed=2, size=1 << 14)
-    values = {"ars": {"ars_lr": 0.05}, "openai": {"lr": 0.05}}.get(name, {})
+    # steps fit for an optimum 5 radii away (PGPE's default speed, a fifteenth of the radius, is for networks)
+    values = {"ars": {"ars_lr": 0.05}, "openai": {"lr": 0.05}, "pgpe": {"clipup_max_speed": 0.15}}.get(name, {})
     strategy = make_strategy(settings_for(name, popsize=16, **values), 10)
     state = strategy.initial_state(np.zeros(10, np.float32))
     before = sphere(state.theta[None])[0]
@@ -203,6 +204,48 @@ def test_clipup_speed_never_exceeds_its_maximum_and_its_step_is_half_of_it_by_de
         speeds.append(float(np.linalg.norm(velocity)))
     assert speeds[0] == pytest.approx(0.15) and speeds[1] == pytest.approx(0.15 * 0.9 + 0.15)
     assert speeds[2] == pytest.approx(0.3)  # 0.285 * 0.9 + 0.15 = 0.4065 clipped to 0.3
+
+
+def test_pgpe_default_max_speed_is_clipups_rule_of_a_fifteenth_of_the_radius():
+    pgpe = make_strategy(settings_for("pgpe", sigma=0.1), 8832)
+    assert pgpe.max_speed == pytest.approx(0.1 * math.sqrt(8832) / 15) and pgpe.lr == pytest.approx(pgpe.max_speed / 2)
+    given = make_strategy(settings_for("pgpe", sigma=0.1, clipup_max_speed=0.15, pgpe_lr=0.1125), 8832)
+    assert (given.max_speed, given.lr) == (0.15, 0.1125)
+
+
+def test_pgpe_steps_as_evotorchs_pgpe_on_the_same_samples():
+    """EvoTorch 0.6.1's PGPE (its symmetric separable Gaussian's gradients, centred ranks, ClipUp, the
+    sigma change limit), fed this strategy's members and fitness: the same centre, sigma and velocity
+    after each of 3 generations."""
+    need("bench")
+    import torch
+    from evotorch.distributions import SymmetricSeparableGaussian
+    from evotorch.optimizers import ClipUp
+    from evotorch.tools import modify_tensor
+
+    dim, popsize = 7, 8
+    strategy = make_strategy(settings_for("pgpe", popsize=popsize, sigma=0.3), dim)
+    noise = NoiseTable(np.random.default_rng(2).standard_normal(256).astype(np.float32))
+    state = strategy.initial_state(np.random.default_rng(3).normal(size=dim).astype(np.float32))
+    clipup = ClipUp(solution_length=dim, dtype=torch.float64, stepsize=strategy.lr, max_speed=strategy.max_speed,
+                    momentum=strategy.momentum)
+    for generation in range(3):
+        population = strategy.ask(state, np.random.default_rng([9, generation]), noise)
+        mu, sigma = torch.tensor(state.theta, dtype=torch.float64), torch.tensor(state.strategy["sigma"])
+        samples = torch.stack([mu + int(sign) * sigma * torch.tensor(noise.slice(index, dim), dtype=torch.float64)
+                               for index, sign in zip(population.indices, population.signs)])
+        fitness = np.random.default_rng(generation).permutation(popsize).astype(np.float64)  # no ties
+        theirs = SymmetricSeparableGaussian({"mu": mu, "sigma": sigma, "divide_mu_grad_by": "num_directions",
+                                             "divide_sigma_grad_by": "num_directions"}, dtype=torch.float64)
+        gradients = theirs.compute_gradients(samples, torch.tensor(fitness), objective_sense="max",
+                                             ranking_method="centered")
+        their_mu = mu + clipup.ascent(gradients["mu"])
+        their_sigma = modify_tensor(sigma, sigma + strategy.sigma_lr * gradients["sigma"],
+                                    max_change=strategy.max_sigma_change)
+        state, _ = strategy.tell(state, noise, population, fitness)
+        np.testing.assert_allclose(state.theta, their_mu.numpy(), rtol=1e-6, atol=1e-6)
+        np.testing.assert_allclose(state.strategy["sigma"], their_sigma.numpy(), rtol=1e-12)
+        np.testing.assert_allclose(state.optimizer["velocity"], clipup._velocity.numpy(), rtol=1e-9, atol=1e-12)
 
 
 # --- SNES against Schaul et al. 2011 ------------------------------------------------------------------

@@ -25,6 +25,12 @@ size alpha (``--pgpe_lr``, by default max_speed / 2, the paper's rule), momentum
 
     v <- clip(m v + alpha g / ||g||, max_speed);  mu <- mu + v,   clip(x, c) = x c / ||x|| if ||x|| > c
 
+max_speed (``--clipup_max_speed``) is by default the ClipUp paper's rule of thumb, the initial search
+radius over 15: sigma sqrt(d) / 15 for d parameters (EvoTorch's examples write max_speed = radius_init / 15,
+or radius_init = 15 max_speed). A fixed 0.15, the paper's value for its small linear policies, is a step
+of a sixtieth of the radius on the project's 8 832-weight CartPole network (sigma 0.1): PGPE solved
+CartPole in 1 of 5 seeds within 30 generations of 16 with it, in 5 of 5 with the rule (docs/strategies.md).
+
 Adam (Kingma & Ba 2015, ``es.optimizers.Adam`` with its default betas) and plain gradient ascent
 (mu += alpha g) on request. Without pgpe_max_sigma_change nothing keeps sigma positive: as in
 EvoTorch, that is the user's to choose.
@@ -32,6 +38,7 @@ EvoTorch, that is the user's to choose.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
@@ -129,7 +136,15 @@ class PGPE:
         return np.clip(updated, sigma * (1 - self.max_sigma_change), sigma * (1 + self.max_sigma_change))
 
 
+def default_max_speed(sigma: float, dim: int) -> float:
+    """ClipUp's rule of thumb (Toklu et al. 2020; EvoTorch's examples: max_speed = radius_init / 15): the
+    largest step is a fifteenth of the initial search radius, the norm sigma sqrt(d) of the sigma vector."""
+    return sigma * math.sqrt(dim) / 15
+
+
 def make(settings: ESSettings, dim: int) -> PGPE:
-    lr = settings.pgpe_lr if settings.pgpe_lr is not None else settings.clipup_max_speed / 2
+    max_speed = settings.clipup_max_speed
+    max_speed = max_speed if max_speed is not None else default_max_speed(settings.sigma, dim)
+    lr = settings.pgpe_lr if settings.pgpe_lr is not None else max_speed / 2
     return PGPE(settings.popsize, settings.sigma, lr, settings.pgpe_sigma_lr, settings.pgpe_max_sigma_change,
-                settings.pgpe_optimizer, settings.clipup_max_speed, settings.clipup_momentum)
+                settings.pgpe_optimizer, max_speed, settings.clipup_momentum)
