@@ -339,6 +339,59 @@ def _road_pixels(drawn, grass_count, grass, rows, values) -> bool:
     return True
 
 
+# the dashboard's polygons (the stock _render_indicators): their colours' pixels, in its order
+_DASHBOARD_COLORS = np.array([0x000000, 0xFFFFFF, 0x0000FF, 0x0000FF, 0x3300FF, 0x3300FF, 0x00FF00, 0xFF0000],
+                             dtype=np.int64)
+
+
+@njit(cache=True, nogil=True)
+def _dashboard(vx, vy, omega0, omega1, omega2, omega3, angle, spin):
+    """The stock ``_render_indicators``'s polygons from its readings (the hull's velocity, the
+    wheels' omegas, wheel 0's joint angle, the hull's spin), with its double expressions: the
+    ``render_if_min`` test, the corners, pygame's truncation to integers. Returns (fits, xs, ys,
+    starts, colours, anti-aliased flags); fits is False where a corner is beyond the compiled
+    drawing's bound (or NaN)."""
+    s, h = _W / 40.0, _H / 40.0
+    true_speed = math.sqrt(vx * vx + vy * vy)  # np.sqrt(np.square(vx) + np.square(vy))
+    values = (1.0, true_speed, omega0, omega1, omega2, omega3, angle, spin)
+    corners = np.empty((8, 8), dtype=np.float64)  # per shown polygon: x, y of its 4 corners in order
+    kept = 0
+    for index in range(8):
+        value = values[index]
+        if not abs(value) > 1e-4:  # the stock render_if_min (NaN is not shown either)
+            continue
+        if index == 0:  # [(W, H), (W, H - 5 h), (0, H - 5 h), (0, H)]
+            left, right, top, bottom = 0.0, float(_W), _H - 5 * h, float(_H)
+            corners[kept] = (right, bottom, right, top, left, top, left, bottom)
+            kept += 1
+            continue
+        if index < 6:  # vertical(place, scaled value)
+            place = 5 if index == 1 else index + 5
+            scaled = 0.02 * value if index == 1 else 0.01 * value
+            left, right, top, bottom = place * s, (place + 1) * s, _H - (h + h * scaled), _H - h
+        else:  # horizontal(place, scaled value)
+            place = 20 if index == 6 else 30
+            scaled = -10.0 * value if index == 6 else -0.8 * value
+            left, right, top, bottom = (place + 0) * s, (place + scaled) * s, _H - 4 * h, _H - 2 * h
+        corners[kept] = (left, top, right, top, right, bottom, left, bottom)
+        kept += 1
+    xs, ys = np.empty(4 * kept, dtype=np.int64), np.empty(4 * kept, dtype=np.int64)
+    colors = np.empty(kept, dtype=np.int64)
+    fits, polygon = True, 0
+    for index in range(8):
+        if not abs(values[index]) > 1e-4:
+            continue
+        colors[polygon] = _DASHBOARD_COLORS[index]
+        for corner in range(4):
+            x, y = corners[polygon, 2 * corner], corners[polygon, 2 * corner + 1]
+            if not (abs(x) < _COMPILED_BOUND and abs(y) < _COMPILED_BOUND):  # NaN too
+                fits = False
+                x, y = 0.0, 0.0
+            xs[4 * polygon + corner], ys[4 * polygon + corner] = int(x), int(y)  # truncation, as pygame
+        polygon += 1
+    return fits, xs, ys, np.arange(kept + 1) * 4, colors, np.zeros(kept, dtype=np.bool_)
+
+
 def _grass_corners() -> np.ndarray:
     """The stock ``_render_road``'s grass squares, with its own float expressions."""
     dim = stock.GRASS_DIM
@@ -599,35 +652,11 @@ class FastCarRacing(stock.CarRacing):
         """The stock ``_render_indicators``'s polygons, its expressions, as ``record_polygons``'
         arguments (pygame's integer corners, pixel values, none anti-aliased: ``pygame.draw.polygon``);
         None if a corner is beyond what the compiled drawing reproduces."""
-        s, h = _W / 40.0, _H / 40.0
-        car = self.car
-
-        def vertical(place, value):
-            return [(place * s, _H - (h + h * value)), ((place + 1) * s, _H - (h + h * value)),
-                    ((place + 1) * s, _H - h), ((place + 0) * s, _H - h)]
-
-        def horizontal(place, value):
-            return [((place + 0) * s, _H - 4 * h), ((place + value) * s, _H - 4 * h),
-                    ((place + value) * s, _H - 2 * h), ((place + 0) * s, _H - 2 * h)]
-
-        true_speed = np.sqrt(np.square(car.hull.linearVelocity[0]) + np.square(car.hull.linearVelocity[1]))
-        wheels = car.wheels
-        shown = [(1.0, [(_W, _H), (_W, _H - 5 * h), (0, _H - 5 * h), (0, _H)], (0, 0, 0)),
-                 (true_speed, vertical(5, 0.02 * true_speed), (255, 255, 255)),
-                 (wheels[0].omega, vertical(7, 0.01 * wheels[0].omega), (0, 0, 255)),
-                 (wheels[1].omega, vertical(8, 0.01 * wheels[1].omega), (0, 0, 255)),
-                 (wheels[2].omega, vertical(9, 0.01 * wheels[2].omega), (51, 0, 255)),
-                 (wheels[3].omega, vertical(10, 0.01 * wheels[3].omega), (51, 0, 255)),
-                 (wheels[0].joint.angle, horizontal(20, -10.0 * wheels[0].joint.angle), (0, 255, 0)),
-                 (car.hull.angularVelocity, horizontal(30, -0.8 * car.hull.angularVelocity), (255, 0, 0))]
-        kept = [(points, color) for value, points, color in shown if abs(value) > 1e-4]  # the stock render_if_min
-        corners = np.array([points for points, _ in kept], dtype=np.float64)  # (polygons, 4, 2)
-        if not np.all(np.abs(corners) < _COMPILED_BOUND):  # also False for NaN
-            return None
-        integers = corners.astype(np.int64)  # truncation, as pygame
-        values = np.array([(color[0] << 16) | (color[1] << 8) | color[2] for _, color in kept], dtype=np.int64)
-        return (integers[:, :, 0].ravel(), integers[:, :, 1].ravel(), np.arange(len(kept) + 1) * 4, values,
-                np.zeros(len(kept), dtype=np.bool_))
+        car, wheels = self.car, self.car.wheels
+        velocity = car.hull.linearVelocity
+        fits, *polygons = _dashboard(velocity[0], velocity[1], *[float(wheel.omega) for wheel in wheels],
+                                     wheels[0].joint.angle, car.hull.angularVelocity)
+        return tuple(polygons) if fits else None
 
     def _score_image(self) -> tuple[np.ndarray, int, int]:
         """The score's pixels as the stock blit writes them, and where: made once per distinct text."""

@@ -19,7 +19,7 @@ from gymnasium.envs.box2d.car_racing import MAX_SHAPE_DIM, PLAYFIELD, CarRacing
 from pygame import gfxdraw
 
 import envs
-from envs import pygame_raster
+from envs import car_racing, pygame_raster
 from envs.car_racing import FastCarRacing, box2d_transform, covers_screen, pygame_pixels, rotate_like_pygame, to_screen
 from envs.car_racing_observation import SpanObservation
 from envs.make import STOCK_CAR_RACING_ID as STOCK_ID
@@ -387,6 +387,62 @@ def test_box2d_transform_is_box2ds_bit_for_bit():
         pose = np.array([[transform.q.c, transform.q.s, *transform.position]] * 8, dtype=np.float32)
         expected = [tuple(transform * tuple(point)) for point in local.tolist()]
         assert box2d_transform(pose, local).tolist() == [list(point) for point in expected]
+
+
+def stock_dashboard(vx, vy, omegas, angle, spin):
+    """Gymnasium's ``_render_indicators``, its expressions written out: the polygons it draws (integer
+    corners as pygame truncates them) and their colours; None if a corner is not a float pygame takes."""
+    W, H = 1000, 800
+    s, h = W / 40.0, H / 40.0
+
+    def vertical(place, value):
+        return [(place * s, H - (h + h * value)), ((place + 1) * s, H - (h + h * value)),
+                ((place + 1) * s, H - h), ((place + 0) * s, H - h)]
+
+    def horizontal(place, value):
+        return [((place + 0) * s, H - 4 * h), ((place + value) * s, H - 4 * h),
+                ((place + value) * s, H - 2 * h), ((place + 0) * s, H - 2 * h)]
+
+    true_speed = np.sqrt(np.square(vx) + np.square(vy))
+    shown = [(1.0, [(W, H), (W, H - 5 * h), (0, H - 5 * h), (0, H)], (0, 0, 0)),
+             (true_speed, vertical(5, 0.02 * true_speed), (255, 255, 255)),
+             (omegas[0], vertical(7, 0.01 * omegas[0]), (0, 0, 255)),
+             (omegas[1], vertical(8, 0.01 * omegas[1]), (0, 0, 255)),
+             (omegas[2], vertical(9, 0.01 * omegas[2]), (51, 0, 255)),
+             (omegas[3], vertical(10, 0.01 * omegas[3]), (51, 0, 255)),
+             (angle, horizontal(20, -10.0 * angle), (0, 255, 0)),
+             (spin, horizontal(30, -0.8 * spin), (255, 0, 0))]
+    drawn = []
+    for value, points, color in shown:
+        if abs(value) > 1e-4:
+            if not all(abs(c) < pygame_raster.LARGEST_COORDINATE + 1 for point in points for c in point):
+                return None  # (NaN too)
+            pixel = (color[0] << 16) | (color[1] << 8) | color[2]
+            drawn.append(([(math.trunc(x), math.trunc(y)) for x, y in points], pixel))
+    return drawn
+
+
+def test_compiled_dashboard_is_the_stock_expressions():
+    rng = np.random.default_rng(23)
+    special = [0.0, 1e-4, -1e-4, np.nextafter(1e-4, 1.0), 3e-3, 1e6, -1e6, np.nan, np.inf, -np.inf]
+    checked = none = 0
+    for _ in range(600):
+        scale = 10.0 ** rng.integers(-5, 4, size=8)
+        readings = (rng.normal(size=8) * scale).tolist()
+        for index in np.flatnonzero(rng.random(8) < 0.2):
+            readings[index] = float(rng.choice(special))
+        expected = stock_dashboard(readings[0], readings[1], readings[2:6], readings[6], readings[7])
+        fits, xs, ys, starts, colors, antialiased = car_racing._dashboard(*readings)
+        if expected is None:
+            assert not fits
+            none += 1
+            continue
+        assert fits and not antialiased.any() and starts.tolist() == list(range(0, 4 * len(expected) + 1, 4))
+        got = [(list(zip(xs[a:b].tolist(), ys[a:b].tolist())), color)
+               for a, b, color in zip(starts[:-1], starts[1:], colors.tolist())]
+        assert got == expected, readings
+        checked += 1
+    assert checked > 150 and none > 30, (checked, none)
 
 
 def test_a_covering_playfield_polygon_is_a_fill():
