@@ -33,8 +33,12 @@ from envs.headless import RenderingUnavailable, check_can_render, check_display,
 from es.files import read_json
 from es.interrupts import honour_sigint
 from es.observations import SavedStatistics, load_statistics, statistics_path
+from es.outputs import JSON_SUFFIXES
+from es.outputs import check_outputs as check_paths
 from es.runfolder import named_file
-from settings import EPISODE_SEED_RANGE, unmet_requirement
+from report.plots import FIGURE_SUFFIXES
+from report.video import VIDEO_SUFFIXES
+from settings import EPISODE_SEED_RANGE, SEED_RANGE, unmet_requirement
 
 COEV_ROLES = (  # --path_coev's
     "coevolved_initial_weights", "CNN_parameters")
@@ -60,16 +64,18 @@ def evaluation_parser(prog: str, description: str, kind: str) -> Parser:
     add("--episodes", type=positive_int, default=1, metavar="N", help="episodes per environment (default: 1)")
     add("--seed", type=episode_seed_value, default=0,
         help="seed of the first episode; episode i uses seed + i; a whole number from {} to {}, the seeds from "
-             "2**31 on being those of the training's centre evaluation (default: 0)".format(*EPISODE_SEED_RANGE))
+             "{} on being those of the training's centre evaluation (default: 0)".format(*EPISODE_SEED_RANGE,
+                                                                                       SEED_RANGE[1] + 1))
     add("--render", type=flag_value, nargs="?", const=True, default=False, metavar="BOOL",
         help="show the episodes in a window (needs a display)")
     add("--video", default=None, metavar="PATH",
-        help="write the first episode to this video file (.mp4, .mkv, .mov or .avi), frame by frame")
+        help=f"write the first episode to this video file ({', '.join(VIDEO_SUFFIXES)}), frame by frame")
     add("--json", default=None, metavar="PATH",
         help="also write the statistics (per environment: returns, mean, std, steps, seeds; for ants "
              "the distances and forward displacements walked) to this JSON file")
     add("--plot", default=None, metavar="PATH",
-        help="PNG of one episode (first environment, first seed): reward per step, or for ants the "
+        help=f"a figure ({', '.join(FIGURE_SUFFIXES)}) of one episode (first environment, first seed): reward per "
+             "step, or for ants the "
              "distance walked, and for Hebbian networks the norm of each layer's weights over time")
     parser.set_defaults(kind=kind)
     add_settings(parser, "evaluate", kind, evaluation_note=FROM_RUN)
@@ -85,11 +91,6 @@ def path_flags(args: argparse.Namespace) -> dict[str, str]:
 def check_outputs(args: argparse.Namespace, inputs: list[str]) -> None:
     """Refuse, before any episode runs, outputs that could not be written or that would replace an
     input (the weight files), a run's file or each other (``es.outputs``, the guard of every output)."""
-    from es.outputs import JSON_SUFFIXES
-    from es.outputs import check_outputs as check_paths
-    from report.plots import FIGURE_SUFFIXES
-    from report.video import VIDEO_SUFFIXES
-
     check_paths([(flag, path, suffixes) for flag, path, suffixes in (("--json", args.json, JSON_SUFFIXES), (
         "--plot", args.plot, FIGURE_SUFFIXES), ("--video", args.video, VIDEO_SUFFIXES)) if path is not None], inputs)
 

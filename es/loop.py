@@ -45,9 +45,10 @@ from es.shaping import penalised_fitness
 from es.strategies import make_strategy
 from es.strategy import Population, Strategy
 from es.worker import TASK_DTYPE, make_tasks
+from settings import EPISODE_SEED_RANGE, SEED_RANGE
 
-SEED_LIMIT = 2**31 - 1
-EVAL_SEEDS = (2**31, 2**32)  # the centre's evaluation episodes: never a training seed
+SEED_LIMIT = SEED_RANGE[1]  # training episodes' seeds are below it: 2**31 - 1
+EVAL_SEEDS = (SEED_RANGE[1] + 1, EPISODE_SEED_RANGE[1] + 1)  # the centre evaluation's: [2**31, 2**32)
 RECORD_STREAM, EVAL_STREAM = 3, 4
 
 

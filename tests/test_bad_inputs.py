@@ -33,14 +33,19 @@ RUN = ("--environment", "CartPole-v1", "--popsize", "4", "--generations", "2", "
        "--obs_norm", "--optimizer", "adam")
 
 
-@pytest.fixture(scope="module")
-def run_folder(tmp_path_factory) -> Path:
-    """One real run, made once for the module; each case works on its own copy."""
-    folder = tmp_path_factory.mktemp("bad_inputs_run")
+def trained_run(folder: Path) -> Path:
+    """The run folder ``train_static.py`` makes in ``folder`` with ``RUN``."""
     result = subprocess.run([sys.executable, str(ROOT / "train_static.py"), *RUN, "--folder", str(folder)], cwd=ROOT,
                             env=BASE_ENV, check=False, capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
     (run,) = folder.iterdir()
+    return run
+
+
+@pytest.fixture(scope="module")
+def run_folder(tmp_path_factory) -> Path:
+    """One real run, made once for the module; each case works on its own copy."""
+    run = trained_run(tmp_path_factory.mktemp("bad_inputs_run"))
     (run / ".lock").unlink()  # held by the process that trained it, now gone
     return run
 

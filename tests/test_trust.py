@@ -229,10 +229,6 @@ def test_a_closed_pipe_ends_training_quietly(tmp_path):
 
 @pytest.fixture(scope="module")
 def run_folder(tmp_path_factory) -> Path:
-    from tests.test_bad_inputs import RUN
+    from tests.test_bad_inputs import trained_run
 
-    folder = tmp_path_factory.mktemp("trust_run")
-    result = subprocess.run([sys.executable, str(ROOT / "train_static.py"), *RUN, "--folder", str(folder)], cwd=ROOT,
-                            env=BASE_ENV, check=False, capture_output=True, text=True, timeout=300)
-    assert result.returncode == 0, result.stderr
-    return next(folder.iterdir())
+    return trained_run(tmp_path_factory.mktemp("trust_run"))
