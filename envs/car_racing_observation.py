@@ -14,8 +14,10 @@ row by row, and the shrinking is computed row by row from those spans:
   C loop once to find which pixels are shared and with which weights;
 - a row is painted in a 1000-pixel buffer (spans in drawing order, blends as pygame blends them);
   an output pixel none of whose source pixels holds a span's end is of one colour, and is copied
-  from a palette of rows of one colour, computed once per colour; the others are summed, three
-  channels at once in 16-bit lanes of one integer (no lane carries: eleven pixels of 255 at most);
+  from a palette of rows of one colour, computed once per colour; the others are summed in loops
+  of fixed length, blue and red in the 16-bit lanes of one integer, green in another (no lane
+  carries: eleven pixels of 255 at most), without a branch that depends on the column: the
+  mispredicted branches of a loop of 9 or 10 pixels had cost more than the sums;
 - a row whose spans are the previous row's is that row; an anti-aliased edge's pixels that the
   polygon's own fill covers right after are never recorded.
 
@@ -27,6 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+from numba.cpython.unsafe.numbers import trailing_zeros
 
 from envs.pygame_raster import SPAN_BITS, blend, draw_polygon, gfx_aapolygon, gfx_filled_polygon
 
@@ -34,6 +37,7 @@ _FLAGS = {"cache": True, "nogil": True}
 _ONE = 0x4000  # the SSE2 filter's unit: a source pixel is 0x4000
 _LANE = 0xFFFF
 _PALETTE = 64  # colours whose uniform output rows are kept (a frame has about a dozen)
+_RECENT = 8  # colours whose palette rows are found without the table (a power of two)
 
 
 def shrink_schedule(source: int, target: int) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
@@ -126,31 +130,55 @@ def _palette_row(color, palette, rows, x_schedule):
     return -1
 
 
-@njit(**_FLAGS)
-def _shrink_row(row, mixed, x_schedule, palette, rows, out):
-    """``filter_shrink_X_SSE2`` of one resolved row into ``out`` (spread pixels); ``mixed`` flags
-    (cleared on the way) the output pixels whose source pixels may differ.
-
-    An output pixel whose source pixels (shared ones included) are of one colour depends on that
-    colour alone: it is copied from the palette's row for that colour. The others are summed.
-    """
+@njit(inline="never", **_FLAGS)
+def _exact_pixel(row, column, x_schedule):
+    """One output pixel of ``filter_shrink_X_SSE2`` from its source pixels, for any column."""
     shared = x_schedule[1]
-    last_color, entry = np.int64(-1), -1
-    for column in range(shared.shape[0]):
-        first = shared[column - 1] + 1 if column > 0 else 0
-        color = np.int64(row[shared[column]])
-        if not mixed[column]:
-            if color != last_color:
-                last_color, entry = color, _palette_row(color, palette, rows, x_schedule)
-            if entry >= 0:
-                out[column] = rows[entry, column]
-                continue
-        mixed[column] = False
-        sums = 0
-        for x in range(first, shared[column]):
-            sums += _spread(row[x])
-        previous = _spread(row[first - 1]) if column > 0 else 0
-        out[column] = _pixel_of(_spread(color), previous, column, sums, x_schedule)
+    first = shared[column - 1] + 1 if column > 0 else 0
+    sums = 0
+    for x in range(first, shared[column]):
+        sums += _spread(row[x])
+    previous = _spread(row[first - 1]) if column > 0 else 0
+    return _pixel_of(_spread(row[shared[column]]), previous, column, sums, x_schedule)
+
+
+@njit(inline="always")
+def _channel(sums, carry, value, weight, reciprocal):
+    """``_output`` of one channel whose carried part is ``carry`` (inlined: a call per channel costs)."""
+    total = (((4 * value * weight) >> 16) + ((sums + carry) & _LANE)) & _LANE
+    return min((total * reciprocal) >> 16, 255)
+
+
+@njit(inline="always")
+def _mixed_pixel(row, first, last, fewest, weight, carried, reciprocal):
+    """``_exact_pixel`` of a column past the first, its whole pixels ``first..last - 1`` being
+    ``fewest`` or one more: a loop of fixed length and the last pixel masked, so that no branch
+    depends on the column (their mispredictions were most of the cost). Blue and red are summed in
+    the lanes of one integer, green in another (ten pixels of 255 fit 16 bits)."""
+    blue_red, green_sum = 0, 0
+    for x in range(first, first + fewest):
+        pixel = np.int64(row[x])
+        blue_red += pixel & 0xFF00FF
+        green_sum += pixel & 0xFF00
+    pixel = np.int64(row[first + fewest]) * (last - first - fewest)  # (the shared pixel, times 0, if not whole)
+    blue_red += pixel & 0xFF00FF
+    green_sum += pixel & 0xFF00
+    value, previous = np.int64(row[last]), np.int64(row[first - 1])
+    blue = _channel(blue_red & _LANE, (4 * (previous & 0xFF) * carried) >> 16, value & 0xFF, weight, reciprocal)
+    green = _channel(green_sum >> 8, (4 * ((previous >> 8) & 0xFF) * carried) >> 16, (value >> 8) & 0xFF, weight,
+                     reciprocal)
+    red = _channel(blue_red >> 16, (4 * ((previous >> 16) & 0xFF) * carried) >> 16, (value >> 16) & 0xFF, weight,
+                   reciprocal)
+    return blue | (green << 16) | (red << 32)
+
+
+@njit(inline="never", **_FLAGS)
+def _missed_entry(color, palette, rows, x_schedule, cache):
+    """``_palette_row`` for a colour the cache of recent colours lacks, then kept in the cache."""
+    entry = _palette_row(color, palette, rows, x_schedule)
+    slot = 2 * ((color ^ (color >> 9)) & (_RECENT - 1))
+    cache[slot], cache[slot + 1] = color, entry
+    return entry
 
 
 @njit(**_FLAGS)
@@ -200,25 +228,65 @@ def _resolve_row(y, row, mixed, column_of, records, counts, background, text, te
 def observe(records, counts, background, text, text_x, text_y, x_schedule, y_schedule, work, out):
     """The (rows, columns, RGB) observation of a height x width picture given as span records.
 
-    ``work``: (row buffer uint32 (width), mixed flags bool (columns), x-shrunk row int64
-    (columns), palette int64 (see ``_palette_row``), its rows int64 (entries, columns)).
+    ``work``: (row buffer uint32 (width), mixed flags bool (columns, then a flag set for good past
+    them, padded to a multiple of 8), the same flags as uint64 words (a view), x-shrunk row int64
+    (columns), palette int64 (see ``_palette_row``), its rows int64 (entries, columns), a cache of
+    recent colours int64 (``_RECENT`` pairs colour, entry), the fewest whole source pixels of an
+    output pixel along x).
+
+    Along x (``filter_shrink_X_SSE2``), the flags are read eight at a time: between two flagged
+    columns the row is of one colour, and those columns are copied from the palette's row for that
+    colour (found in the cache of recent colours first); a flagged one is summed (``_mixed_pixel``).
+    Written in one loop: this is the observation's hot path, and the same code as helper functions
+    ran 25 % slower.
     """
-    row, mixed, shrunk, palette, rows = work
-    height, column_of = records.shape[0], x_schedule[4]
+    row, mixed, words, shrunk, palette, rows, cache, fewest = work
+    height, column_of, columns = records.shape[0], x_schedule[4], shrunk.shape[0]
+    x_reciprocal, x_shared, x_weights, x_carried = x_schedule[0], x_schedule[1], x_schedule[2], x_schedule[3]
     reciprocal, shared, weights, carried, _ = y_schedule
-    sums = np.zeros(shrunk.shape[0], dtype=np.int64)
+    sums = np.zeros(columns, dtype=np.int64)
     output_row = 0
     for y in range(height):
         # a row drawn as the previous one was is the same row: its shrunk pixels are there already
         text_row = text.shape[0] > 0 and text_y <= y <= text_y + text.shape[0]  # (or the row after it)
         if y == 0 or text_row or not _same_spans(records, counts, y):
             _resolve_row(y, row, mixed, column_of, records, counts, background, text, text_x, text_y)
-            _shrink_row(row, mixed, x_schedule, palette, rows, shrunk)
+            start = 0
+            for index in range(words.shape[0]):
+                word = words[index]
+                if word == 0:
+                    continue
+                words[index] = 0
+                while word != 0:  # (the flags are bytes 0 or 1: one set bit per flagged column)
+                    column = 8 * index + (np.int64(trailing_zeros(word)) >> 3)
+                    word &= word - np.uint64(1)
+                    if column > start:  # start..column - 1: one colour
+                        color = np.int64(row[x_shared[start]])
+                        slot = 2 * ((color ^ (color >> 9)) & (_RECENT - 1))
+                        entry = cache[slot + 1]
+                        if cache[slot] != color:
+                            entry = _missed_entry(color, palette, rows, x_schedule, cache)
+                        if entry >= 0:
+                            for uniform in range(start, column):
+                                shrunk[uniform] = rows[entry, uniform]
+                        else:  # the palette is full
+                            for uniform in range(start, column):
+                                shrunk[uniform] = _exact_pixel(row, uniform, x_schedule)
+                    if column == columns:  # the flag past the last column
+                        break
+                    if column == 0:
+                        shrunk[0] = _exact_pixel(row, 0, x_schedule)
+                    else:
+                        shrunk[column] = _mixed_pixel(row, x_shared[column - 1] + 1, x_shared[column], fewest,
+                                                      x_weights[column], x_carried[column - 1], x_reciprocal)
+                    start = column + 1
+            mixed[columns] = True
         if output_row < shared.shape[0] and y == shared[output_row]:
             _write_row(shrunk, sums, weights[output_row], carried[output_row], reciprocal, out[output_row])
             output_row += 1
         else:
-            sums += shrunk
+            for column in range(columns):
+                sums[column] += shrunk[column]
 
 
 @njit(**_FLAGS)
@@ -252,11 +320,16 @@ class SpanObservation:
         if width > 1 << SPAN_BITS:
             raise ValueError(f"span records hold x up to {(1 << SPAN_BITS) - 1}, the picture is {width} wide")
         self.records = np.empty((height, capacity), dtype=np.int64)
-        self._work = (np.empty(width, dtype=np.uint32), np.zeros(columns, dtype=np.bool_),
-                      np.empty(columns, dtype=np.int64),
+        whole = np.diff(self.x_schedule[1], prepend=-1)[1:] - 1  # whole source pixels of columns 1, 2, ...
+        if len(whole) and whole.max() - whole.min() > 1:
+            raise ValueError(f"smoothscale's walk from {width} to {columns} sums {set(whole.tolist())} whole pixels")
+        mixed = np.zeros((columns // 8 + 1) * 8, dtype=np.bool_)
+        mixed[columns] = True  # (observe: the end of the last run of uniform columns)
+        self._work = (np.empty(width, dtype=np.uint32), mixed, mixed.view(np.uint64), np.empty(columns, dtype=np.int64),
                       np.full(1 + 4 * _PALETTE, -1, dtype=np.int64),  # a table twice the palette's size
-                      np.empty((_PALETTE, columns), dtype=np.int64))
-        self._work[3][0] = 0
+                      np.empty((_PALETTE, columns), dtype=np.int64),
+                      np.full(2 * _RECENT, -1, dtype=np.int64), int(whole.min()) if len(whole) else 0)
+        self._work[4][0] = 0
         self._before, self._between = np.empty(height, dtype=np.int64), np.empty(height, dtype=np.int64)
 
     def target(self) -> tuple:
