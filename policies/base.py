@@ -20,7 +20,9 @@ what it does, and nothing outside asks a policy anything else (no ``getattr`` pr
   feeds another, ``inner``, spells out every member of the protocol, and says what it is in
   ``describe_front_ends``;
 - **add metrics columns**: ``metrics_columns`` names them, ``evolved_values`` gives their values for
-  a parameter vector (the reservoir's evolved hyperparameters); ``es.files`` writes them.
+  a parameter vector (the reservoir's evolved hyperparameters); ``es.files`` writes them;
+- **import heavy modules in its episodes**: ``worker_modules`` names them (torch, for the
+  convolutional front end), for the process pool to load once before its workers start.
 
 Concrete policies subclass ``Policy`` to inherit the defaults (PEP 544 allows a protocol with default
 members to be subclassed explicitly).
@@ -90,6 +92,10 @@ class Policy(Protocol):
 
     metrics_columns: tuple[str, ...] = ()  # the metrics.csv columns ``evolved_values`` fills
 
+    # modules its episodes import that a process pool's fork server loads once, for the workers to
+    # share their pages (``es.backends.process``): torch's libraries alone are ~120 MiB per process
+    worker_modules: tuple[str, ...] = ()
+
     def evolved_values(self, params: np.ndarray) -> dict[str, float]:
         """column -> value for ``params``: settings it evolves beside its weights; {} for most policies."""
         return {}
@@ -111,7 +117,7 @@ class FrontEnd(Policy):
         self.layout, self.num_params = inner.layout, inner.num_params
         self.penalised, self.penalised_name, self.roles = inner.penalised, inner.penalised_name, inner.roles
         self.normalised_inputs, self.obs_clip = inner.normalised_inputs, inner.obs_clip
-        self.metrics_columns = inner.metrics_columns
+        self.metrics_columns, self.worker_modules = inner.metrics_columns, inner.worker_modules
         self._inner = slice(0, inner.num_params)
 
     def initial_params(self, rng: np.random.Generator) -> np.ndarray:

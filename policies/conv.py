@@ -16,6 +16,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+MODULES = ("torch",)  # what ConvFeatures imports (a policy with a front end names them: worker_modules)
+
 
 @njit(cache=True, nogil=True)  # no fastmath: NaN and the sign of zero must survive as they are
 def max_pool2(planes: np.ndarray) -> np.ndarray:

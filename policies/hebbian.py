@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from policies.base import Policy
+from policies.conv import MODULES as CONV_MODULES
 from policies.conv import ConvFeatures
 from policies.init import COEVOLVE, INIT_CHOICES, sample_weights
 from policies.kernels import hebbian_forward_update
@@ -61,6 +62,7 @@ class HebbianPolicy(Policy):
             raise ValueError(f"unknown --distribution {distribution!r}; valid values: {', '.join(DISTRIBUTIONS)}")
         net.check_cnn_input()
         self.net = net
+        self.worker_modules = CONV_MODULES if net.pixels else ()
         self._sizes = net.head_sizes  # the kernel's layer sizes, once, not per step
         self.distribution = distribution
         self.rule = get_rule(rule)

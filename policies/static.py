@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from policies.base import Policy
+from policies.conv import MODULES as CONV_MODULES
 from policies.conv import ConvFeatures
 from policies.init import default_init
 from policies.kernels import static_forward
@@ -66,6 +67,7 @@ class StaticPolicy(WeightFile):
     def __init__(self, net: NetworkSpec):
         net.check_cnn_input()
         self.net = net
+        self.worker_modules = CONV_MODULES if net.pixels else ()
         conv = [(f"conv{i + 1}", shape) for i, shape in enumerate(net.conv_shapes)] if net.pixels else []
         dense = [(f"fc{i + 1}", shape) for i, shape in enumerate(net.layer_shapes)]
         self.layout = Layout(conv + dense)

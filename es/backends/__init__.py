@@ -40,7 +40,7 @@ def make_evaluator(run: RunSettings, build_problem: Callable[[], object], noise:
         return SerialEvaluator(lambda: problem, noise, dim, env_ids)
     problem.close()
     if run.backend == "process":
-        return ProcessEvaluator(build_problem, noise, dim, env_ids, run.workers)
+        return ProcessEvaluator(build_problem, noise, dim, env_ids, run.workers, problem.policy.worker_modules)
     if run.backend == "ray":
         try:
             from es.backends.ray import RayEvaluator
