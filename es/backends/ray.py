@@ -205,6 +205,13 @@ class RayEvaluator:
         while book.remaining:
             while idle and book.waiting:
                 actor, indices = idle.pop(), book.next_chunk(size, alone=suspects)
+                if indices[0] in suspects and (death := self._death(actor)) is not None:
+                    # a task whose worker died runs again alone, so that it is charged if it kills
+                    # its worker; it goes only to a worker seen alive: one lost at the same time as
+                    # the first (a node going down), whose last chunk came back, charges no task
+                    book.put_back(indices)
+                    self._replace(actor, [], book, suspects, death)
+                    continue
                 reference = actor.run.remote(generation.number, generation.sigma, theta_ref, generation.statistics,
                                              indices, tasks[indices], scale_ref, members_ref)
                 in_flight[reference] = actor, indices
@@ -225,6 +232,15 @@ class RayEvaluator:
         self._chunks.finished(len(tasks))
         return book.results
 
+    @staticmethod
+    def _death(actor) -> RayActorError | None:
+        """Why ``actor`` is dead, or None if it answers."""
+        try:
+            ray.get(actor.ready.remote())
+        except RayActorError as error:
+            return error
+        return None
+
     def _replace(self, actor, indices: list[int], book: TaskBook, suspects: set[int],
                  error: RayActorError) -> None:
         """Start a fresh actor for a dead one; its unfinished tasks go back in the queue."""
@@ -235,6 +251,8 @@ class RayEvaluator:
         suspects.update(indices)
         if len(indices) == 1:  # alone in its chunk: this task is what the actor was running
             book.failed(indices[0], f"Ray worker died ({_death_reason(error)})")
+        elif not indices:
+            book.note(f"a Ray worker died ({_death_reason(error)}); it was replaced")
         else:
             book.note(f"a Ray worker died ({_death_reason(error)}); it was replaced, and its {len(indices)} "
                       "unfinished episodes run again, one at a time")
