@@ -9,6 +9,7 @@
   initialisation (the static network's generation 0) and N(0, 1) (the Hebbian network's CNN);
 - tanh: the largest error of the compiled pass's rational tanh against ``math.tanh`` (double), and
   whether it is non-decreasing, over every ``--tanh_every``-th float32 of [0, 8] (1: all of them);
+- outputs: the static and the Hebbian networks' outputs on those frames, in order, with and without it;
 - returns: one static and one Hebbian parameter vector (generation-0 draws, fixed seeds) evaluated
   with and without the flag on the same ``--episodes`` seeds, episodes capped at ``--steps``.
 """
@@ -114,6 +115,24 @@ def tanh_error(every: int) -> tuple[float, float, float, float, int]:
     return largest, at, largest_ulp, at_ulp, decreases
 
 
+def actions(frames: list[np.ndarray]) -> None:
+    """The networks' outputs on the same sequence of frames, with and without the flag (the Hebbian
+    network's weights change along it, so differences could grow)."""
+    for kind in ("static", "hebbian"):
+        outputs = []
+        for fast in (False, True):
+            problem = ProblemSpec(("CarRacing-v3",), PolicySettings(kind, fast_conv=fast)).build()
+            try:
+                policy = problem.policy
+                params = policy.initial_params(np.random.default_rng(7))
+                state = policy.reset(params, np.random.default_rng(8))
+                outputs.append(np.array([policy.act(params, state, frame)[0].copy() for frame in frames]))
+            finally:
+                problem.close()
+        print(f"{kind} network's outputs over the {len(frames)} frames: largest |torch - fast| "
+              f"{np.abs(outputs[0] - outputs[1]).max():.2e} (outputs up to {np.abs(outputs[0]).max():.2f})")
+
+
 def returns(episodes: int, steps: int) -> None:
     for kind in ("static", "hebbian"):
         line = []
@@ -122,15 +141,14 @@ def returns(episodes: int, steps: int) -> None:
             problem = ProblemSpec(("CarRacing-v3",), settings, max_episode_steps=steps).build()
             try:
                 params = problem.policy.initial_params(np.random.default_rng(7))
-                line.append([rollout(problem.envs[0], problem.policy, params, seed).total_return
-                             for seed in range(episodes)])
+                line.append([rollout(problem.envs[0], problem.policy, params, seed) for seed in range(episodes)])
             finally:
                 problem.close()
-        torch_returns, fast_returns = line
-        print(f"{kind}, {episodes} episodes of up to {steps} steps, seeds 0..{episodes - 1}:")
-        print("  torch: " + " ".join(f"{value:.4f}" for value in torch_returns))
-        print("  fast:  " + " ".join(f"{value:.4f}" for value in fast_returns))
-        print(f"  largest |difference| {max(abs(a - b) for a, b in zip(torch_returns, fast_returns)):.2e}")
+        print(f"{kind}, {episodes} episodes of up to {steps} steps, seeds 0..{episodes - 1}, return (steps):")
+        for name, episodes_run in zip(("torch", "fast"), line, strict=True):
+            print(f"  {name:6}" + " ".join(f"{episode.total_return:.4f} ({episode.steps})" for episode in episodes_run))
+        largest = max(abs(a.total_return - b.total_return) for a, b in zip(*line, strict=True))
+        print(f"  largest |difference| {largest:.2e}")
 
 
 def main() -> None:
@@ -148,6 +166,7 @@ def main() -> None:
     checked = "every float32" if args.tanh_every == 1 else f"every {args.tanh_every}th float32"
     print(f"tanh on {checked} of [0, 8]: largest error {largest:.2e} (at x = {at:.6g}), {ulps:.1f} ulp "
           f"(at x = {at_ulp:.6g}); decreasing steps: {decreases}")
+    actions(frames)
     returns(args.episodes, args.steps)
 
 

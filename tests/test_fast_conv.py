@@ -26,8 +26,8 @@ from policies.network import NetworkSpec, conv_shapes
 from tests.test_pinned import CASES, PINNED, parameters_hash, train
 
 ROOT = Path(__file__).resolve().parent.parent
-# measured: 9.2e-6 on real frames with N(0, 1) weights, 2.7e-7 with PyTorch's default initialisation
-TOLERANCE = 2e-5
+# measured (benchmarks/fast_conv.py, 300 frames): 1.2e-5 with N(0, 1) weights, 2.4e-7 with PyTorch's default init
+TOLERANCE = 5e-5
 
 
 def weights_for(channels: int, rng: np.random.Generator, scale: float) -> np.ndarray:
