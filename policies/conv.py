@@ -8,8 +8,9 @@ Its weights are evolved and never plastic. Two implementations compute it from t
   every run has been trained and pinned with (``tests/test_pinned.py``). torch is imported only when it
   is built, so state-vector runs never pay for it.
 - ``--fast_conv`` (``fast_features``): one compiled pass over preallocated buffers, about 4x faster on
-  one frame (docs/speed-carracing.md). It differs from torch in the low bits: its own summation order,
-  and the dense head's rational tanh (``policies.kernels``: within 4.4 ulp of tanh), so it is opt-in.
+  one frame (docs/speed-carracing.md). It differs from torch in the low bits (features within about
+  1e-5): its own summation order, and the dense head's rational tanh (``policies.kernels``) evaluated
+  without fastmath (within 4.1e-7 of tanh over every float32), so it is opt-in.
 
 The max-pooling is ``max_pool2``, a compiled loop that returns what torch's ``max_pool2d(x, 2)``
 returns, bit for bit: on this 2-core machine torch's kernel took about 0.3 ms for the first
@@ -17,7 +18,8 @@ pooling, the loop 0.02 ms, and a forward pass went from about 1.1 to 0.75 ms (is
 fast CarRacing, the pixel policy had become a third of a step).
 
 The compiled pass takes each window's maximum before its tanh: tanh is non-decreasing, so
-tanh(max x) = max tanh(x), with a quarter of the tanh calls; conv2 computes only the 18 x 18 of its
+tanh(max x) = max tanh(x), with a quarter of the tanh calls (the rational tanh steps down by one ulp
+at some floats, so a feature may be 1 ulp from the max of the tanhs); conv2 computes only the 18 x 18 of its
 19 x 19 outputs that the floor-mode pooling keeps. Per output pixel it sums, channel by channel,
 the k x k taps in row-major order; the taps' loops have constant bounds (``K1``, ``K2``), so they
 unroll and the loop over a row's pixels vectorises without fastmath.
