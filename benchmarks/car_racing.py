@@ -4,6 +4,7 @@
     python benchmarks/car_racing.py               # speed, the training loops, the projection
     python benchmarks/car_racing.py --memory      # and the paper's Hebbian run's memory (PSS/USS)
     python benchmarks/car_racing.py --identity    # and long episodes compared step by step
+    python benchmarks/car_racing.py --fast_conv   # and the Hebbian loop with the opt-in compiled CNN
 
 Gymnasium's class is ``CarRacingStock-v3``, the project's ``CarRacing-v3``. Everything is timed in
 CPU time of this process, the two classes alternating (round by round for the environment, episode
@@ -21,6 +22,9 @@ the medians over rounds are printed.
 - the projection of the paper's Hebbian run (population 200, 300 generations, episodes of 1000
   steps) on 2 and 16 workers from the capped Hebbian loop's cost per step, as
   ``experiments/step_cost.py`` does: (popsize + 1) x 1000 x step / workers per generation;
+- ``--fast_conv``: the capped Hebbian loop again, the fast class's network with ``--fast_conv``
+  (``policies.conv``: not bit for bit; docs/speed-carracing.md) against the stock class's with torch,
+  and its projection;
 - ``--memory``: ``train_hebb.py`` at the paper's population (200) with 2 workers for one
   generation, its processes' summed PSS and USS (``/proc/PID/smaps_rollup``) sampled while it runs;
 - ``--identity``: episodes of up to 1000 steps on seeds and drivers that no test uses, observations,
@@ -156,9 +160,12 @@ def _pixel_chain(problem):
     return pixels, squash, pixels.env
 
 
-def capped_loop_rates(kind: str, rounds: int, episodes: int, length: int) -> tuple[list[float], list[float]]:
-    """Steps per CPU second of the capped training loop with each class, per round (resets counted)."""
-    problems = [ProblemSpec((env_id,), PolicySettings(kind)).build() for env_id in (STOCK_ID, FAST_ID)]
+def capped_loop_rates(kind: str, rounds: int, episodes: int, length: int,
+                      fast_conv: bool = False) -> tuple[list[float], list[float]]:
+    """Steps per CPU second of the capped training loop with each class, per round (resets counted);
+    ``fast_conv``: the fast class's network with ``--fast_conv`` (the stock class's with torch)."""
+    problems = [ProblemSpec((STOCK_ID,), PolicySettings(kind)).build(),
+                ProblemSpec((FAST_ID,), PolicySettings(kind, fast_conv=fast_conv)).build()]
     params = problems[0].policy.initial_params(np.random.default_rng(0))
     for problem in problems:
         capped_episode(problem, params, 0, 3)  # warm-up: compilation
@@ -364,6 +371,15 @@ def paper_run_memory(workers: int, popsize: int) -> tuple[int, int, int]:
     return peak_pss, peak_uss, most
 
 
+def projection(step: tuple[float, float], label: str) -> None:
+    """The paper's Hebbian run's hours on 2 and 16 workers from (stock, fast) CPU seconds per capped step."""
+    for workers in (2, 16):
+        hours = [(PAPER_POPSIZE + 1) * FULL_EPISODE * seconds / workers * PAPER_GENERATIONS / 3600 for seconds in step]
+        print(f"projection, the paper's Hebbian run (popsize {PAPER_POPSIZE}, {PAPER_GENERATIONS} generations, "
+              f"{FULL_EPISODE}-step episodes) on {workers} workers: stock {hours[0]:.1f} h, "
+              f"fast{label} {hours[1]:.1f} h")
+
+
 def summary(label: str, stock: list[float], fast: list[float], target: float | None = None,
             unit: str = "steps") -> None:
     ratios = [f / s for s, f in zip(stock, fast)]
@@ -382,6 +398,8 @@ def main() -> int:
     parser.add_argument("--length", type=int, default=300, help="steps of a capped episode")
     parser.add_argument("--share_steps", type=int, default=600, help="steps measured for the policy's share")
     parser.add_argument("--memory", action="store_true", help="also measure the paper's Hebbian run's memory")
+    parser.add_argument("--fast_conv", action="store_true",
+                        help="also the capped Hebbian loop and the projection with the opt-in compiled CNN")
     parser.add_argument("--identity", action="store_true", help="also compare long episodes frame by frame")
     parser.add_argument("--episodes_compared", type=int, default=20, help="with --identity: how many episodes")
     parser.add_argument("--frame_every", type=int, default=50, help="with --identity: compare render() this often")
@@ -402,11 +420,12 @@ def main() -> int:
                 LOOP_TARGET if kind == "hebbian" else None)
         if kind == "hebbian":
             hebbian_step = (1 / statistics.median(stock), 1 / statistics.median(fast))
-    for workers in (2, 16):
-        hours = [(PAPER_POPSIZE + 1) * FULL_EPISODE * step / workers * PAPER_GENERATIONS / 3600
-                 for step in hebbian_step]
-        print(f"projection, the paper's Hebbian run (popsize {PAPER_POPSIZE}, {PAPER_GENERATIONS} generations, "
-              f"{FULL_EPISODE}-step episodes) on {workers} workers: stock {hours[0]:.1f} h, fast {hours[1]:.1f} h")
+    projection(hebbian_step, "")
+    if args.fast_conv:
+        stock, fast = capped_loop_rates("hebbian", args.rounds, args.episodes, args.length, fast_conv=True)
+        summary(f"training loop, episodes capped at {args.length} steps, hebbian, the fast class with --fast_conv "
+                "against the stock class with torch", stock, fast, LOOP_TARGET)
+        projection((1 / statistics.median(stock), 1 / statistics.median(fast)), ", fast with --fast_conv")
     for kind in ("static", "hebbian"):
         parts = policy_share(kind, args.share_steps)
         total = sum(parts.values())

@@ -23,8 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from policies.base import Policy
-from policies.conv import MODULES as CONV_MODULES
 from policies.conv import ConvFeatures
+from policies.conv import worker_modules as conv_modules
 from policies.init import COEVOLVE, INIT_CHOICES, sample_weights
 from policies.kernels import hebbian_forward_update
 from policies.network import Layout, NetworkSpec, from_kernel_layout, to_kernel_layout
@@ -54,7 +54,7 @@ class HebbianPolicy(Policy):
     penalised_name = "coeffs"
 
     def __init__(self, net: NetworkSpec, rule: str = "ABCD_lr", init_weights: str = "uni",
-                 normalise: bool = True, distribution: str = "normal"):
+                 normalise: bool = True, distribution: str = "normal", fast_conv: bool = False):
         if init_weights not in INIT_CHOICES:
             raise ValueError(f"unknown --init_weights {init_weights!r}; valid values: "
                              f"{', '.join(INIT_CHOICES)}")
@@ -62,12 +62,13 @@ class HebbianPolicy(Policy):
             raise ValueError(f"unknown --distribution {distribution!r}; valid values: {', '.join(DISTRIBUTIONS)}")
         net.check_cnn_input()
         self.net = net
-        self.worker_modules = CONV_MODULES if net.pixels else ()
         self._sizes = net.head_sizes  # the kernel's layer sizes, once, not per step
         self.distribution = distribution
         self.rule = get_rule(rule)
         self.init_weights = init_weights
         self.normalise = normalise
+        self.fast_conv = fast_conv  # the CNN's compiled pass (policies.conv)
+        self.worker_modules = conv_modules(fast_conv) if net.pixels else ()
         n_syn, k = net.n_synapses, self.rule.n_coeffs
         parts: list[tuple[str, tuple[int, ...]]] = [("coefficients", (n_syn, k))]
         if init_weights == COEVOLVE:
@@ -112,7 +113,7 @@ class HebbianPolicy(Policy):
     def reset(self, params: np.ndarray, rng: np.random.Generator) -> HebbianState:
         weights, conv = self.initial_weights(params, rng)
         work, out = head_buffers(self.net)
-        features = ConvFeatures(conv, self.net.conv_shapes) if conv is not None else None
+        features = ConvFeatures(conv, self.net.conv_shapes, self.fast_conv) if conv is not None else None
         return HebbianState(weights, self.fold(params), np.ones(3, dtype=np.float32), work, out, features)
 
     def act(self, params: np.ndarray, state: HebbianState, obs: np.ndarray):

@@ -12,8 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from policies.base import Policy
-from policies.conv import MODULES as CONV_MODULES
 from policies.conv import ConvFeatures
+from policies.conv import worker_modules as conv_modules
 from policies.init import default_init
 from policies.kernels import static_forward
 from policies.network import Layout, NetworkSpec, to_kernel_layout
@@ -64,10 +64,11 @@ class WeightFile(Policy):
 
 
 class StaticPolicy(WeightFile):
-    def __init__(self, net: NetworkSpec):
+    def __init__(self, net: NetworkSpec, fast_conv: bool = False):
         net.check_cnn_input()
         self.net = net
-        self.worker_modules = CONV_MODULES if net.pixels else ()
+        self.fast_conv = fast_conv  # the CNN's compiled pass (policies.conv)
+        self.worker_modules = conv_modules(fast_conv) if net.pixels else ()
         conv = [(f"conv{i + 1}", shape) for i, shape in enumerate(net.conv_shapes)] if net.pixels else []
         dense = [(f"fc{i + 1}", shape) for i, shape in enumerate(net.layer_shapes)]
         self.layout = Layout(conv + dense)
@@ -83,7 +84,8 @@ class StaticPolicy(WeightFile):
 
     def reset(self, params: np.ndarray, rng: np.random.Generator | None = None) -> StaticState:
         work, out = head_buffers(self.net)
-        features = ConvFeatures(params[:self.net.conv_size], self.net.conv_shapes) if self.net.pixels else None
+        features = (ConvFeatures(params[:self.net.conv_size], self.net.conv_shapes, self.fast_conv)
+                    if self.net.pixels else None)
         return StaticState(to_kernel_layout(params[self._head], self.net.layer_shapes), work, out, features)
 
     def act(self, params: np.ndarray, state: StaticState, obs: np.ndarray):

@@ -1,0 +1,174 @@
+#!/usr/bin/env python
+"""The pixel CNN, torch's path against ``--fast_conv``'s compiled pass (issue 21, item 3), in one run.
+
+    python benchmarks/fast_conv.py
+
+- per frame: both paths on the same real CarRacing-v3 observations and the same weights, one
+  thread, CPU time of this process, alternating round by round; the medians over ``--rounds``;
+- the features: the largest difference between the two paths on those frames, for PyTorch's default
+  initialisation (the static network's generation 0) and N(0, 1) (the Hebbian network's CNN);
+- tanh: the largest error of the compiled pass's rational tanh against ``math.tanh`` (double), and
+  whether it is non-decreasing, over every ``--tanh_every``-th float32 of [0, 8] (1: all of them);
+- outputs: the static and the Hebbian networks' outputs on those frames, in order, with and without it;
+- returns: one static and one Hebbian parameter vector (generation-0 draws, fixed seeds) evaluated
+  with and without the flag on the same ``--episodes`` seeds, episodes capped at ``--steps``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from numba import njit
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from envs import ProblemSpec, rollout
+from policies import PolicySettings
+from policies.conv import ConvFeatures, rational_tanh
+from policies.init import default_init
+from policies.network import Layout, conv_shapes
+
+SHAPES = conv_shapes(3)
+
+
+def observations(count: int, seed: int = 0) -> list[np.ndarray]:
+    """``count`` CarRacing-v3 observations (the network's input) under random actions."""
+    problem = ProblemSpec(("CarRacing-v3",), PolicySettings("static")).build()
+    env, rng, frames = problem.envs[0], np.random.default_rng(seed), []
+    try:
+        observation, _ = env.reset(seed=seed)
+        while len(frames) < count:
+            frames.append(np.array(observation, dtype=np.float32))
+            observation, _, terminated, truncated, _ = env.step(env.action_space.sample())
+            if terminated or truncated:
+                observation, _ = env.reset(seed=int(rng.integers(2**31)))
+    finally:
+        problem.close()
+    return frames
+
+
+def conv_weights(kind: str, seed: int) -> np.ndarray:
+    """The CNN of a static network's generation 0 (``default``) or of a Hebbian one (``normal``)."""
+    rng = np.random.default_rng(seed)
+    if kind == "normal":
+        return rng.standard_normal(sum(int(np.prod(shape)) for shape in SHAPES), dtype=np.float32)
+    layout = Layout([("conv1", SHAPES[0]), ("conv2", SHAPES[1])])
+    return default_init(layout, rng, {name: int(np.prod(part.shape[1:])) for name, part in layout.parts.items()})
+
+
+def per_frame(features: ConvFeatures, frames: list[np.ndarray]) -> float:
+    start = time.process_time()
+    for frame in frames:
+        features(frame)
+    return (time.process_time() - start) / len(frames)
+
+
+def speed(frames: list[np.ndarray], rounds: int) -> None:
+    weights = conv_weights("default", 1)
+    paths = {"torch": ConvFeatures(weights, SHAPES), "fast": ConvFeatures(weights, SHAPES, fast=True)}
+    per_frame(paths["fast"], frames[:1])  # compiled (or loaded from numba's cache) before timing
+    times: dict[str, list[float]] = {name: [] for name in paths}
+    for _ in range(rounds):
+        for name, features in paths.items():
+            times[name].append(per_frame(features, frames))
+    torch_us, fast_us = (statistics.median(times[name]) * 1e6 for name in paths)
+    print(f"per frame ({len(frames)} CarRacing frames, median of {rounds} rounds): torch {torch_us:.0f} us, "
+          f"--fast_conv {fast_us:.0f} us, {torch_us / fast_us:.2f}x")
+
+
+def differences(frames: list[np.ndarray]) -> None:
+    for kind in ("default", "normal"):
+        weights = conv_weights(kind, 2)
+        torch_path, fast = ConvFeatures(weights, SHAPES), ConvFeatures(weights, SHAPES, fast=True)
+        largest = max(float(np.abs(torch_path(frame) - fast(frame)).max()) for frame in frames)
+        print(f"features, {kind} weights: largest |torch - fast| over {len(frames)} frames {largest:.2e}")
+
+
+@njit(cache=True)
+def tanh_error(every: int) -> tuple[float, float, float, float, int]:
+    """On float32 x in [0, 8] (every ``every``-th; tanh and ``rational_tanh`` are odd): the largest absolute
+    error of ``rational_tanh`` and its x, the largest in float32 ulps and its x, and how often it
+    decreases from one float32 checked to the next (then a window's tanh of the max, which the pass
+    takes, may be 1 ulp from the max of the tanhs)."""
+    bits = np.zeros(1, dtype=np.int32)
+    top = np.array([8.0], dtype=np.float32).view(np.int32)[0]
+    largest, at, largest_ulp, at_ulp, decreases, previous = 0.0, 0.0, 0.0, 0.0, 0, np.float32(0.0)
+    for pattern in range(0, top + 1, every):
+        bits[0] = pattern
+        x = bits.view(np.float32)[0]
+        got = rational_tanh(x)
+        exact = math.tanh(np.float64(x))
+        error = abs(np.float64(got) - exact)
+        ulps = error / max(math.ldexp(1.0, math.frexp(exact)[1] - 24), 2.0**-149)  # float32's spacing there
+        if error > largest:
+            largest, at = error, x
+        if ulps > largest_ulp:
+            largest_ulp, at_ulp = ulps, x
+        decreases += got < previous
+        previous = got
+    return largest, at, largest_ulp, at_ulp, decreases
+
+
+def actions(frames: list[np.ndarray]) -> None:
+    """The networks' outputs on the same sequence of frames, with and without the flag (the Hebbian
+    network's weights change along it, so differences could grow)."""
+    for kind in ("static", "hebbian"):
+        outputs = []
+        for fast in (False, True):
+            problem = ProblemSpec(("CarRacing-v3",), PolicySettings(kind, fast_conv=fast)).build()
+            try:
+                policy = problem.policy
+                params = policy.initial_params(np.random.default_rng(7))
+                state = policy.reset(params, np.random.default_rng(8))
+                outputs.append(np.array([policy.act(params, state, frame)[0].copy() for frame in frames]))
+            finally:
+                problem.close()
+        print(f"{kind} network's outputs over the {len(frames)} frames: largest |torch - fast| "
+              f"{np.abs(outputs[0] - outputs[1]).max():.2e} (outputs up to {np.abs(outputs[0]).max():.2f})")
+
+
+def returns(episodes: int, steps: int) -> None:
+    for kind in ("static", "hebbian"):
+        line = []
+        for fast in (False, True):
+            settings = PolicySettings(kind, fast_conv=fast)
+            problem = ProblemSpec(("CarRacing-v3",), settings, max_episode_steps=steps).build()
+            try:
+                params = problem.policy.initial_params(np.random.default_rng(7))
+                line.append([rollout(problem.envs[0], problem.policy, params, seed) for seed in range(episodes)])
+            finally:
+                problem.close()
+        print(f"{kind}, {episodes} episodes of up to {steps} steps, seeds 0..{episodes - 1}, return (steps):")
+        for name, episodes_run in zip(("torch", "fast"), line, strict=True):
+            print(f"  {name:6}" + " ".join(f"{episode.total_return:.4f} ({episode.steps})" for episode in episodes_run))
+        largest = max(abs(a.total_return - b.total_return) for a, b in zip(*line, strict=True))
+        print(f"  largest |difference| {largest:.2e}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--frames", type=int, default=300, help="CarRacing frames timed per path and round")
+    parser.add_argument("--episodes", type=int, default=3, help="episodes per network and path")
+    parser.add_argument("--steps", type=int, default=300, help="the episodes' cap")
+    parser.add_argument("--tanh_every", type=int, default=64, help="1: every float32 of [0, 8] (about a minute)")
+    args = parser.parse_args()
+    frames = observations(args.frames)
+    speed(frames, args.rounds)
+    differences(frames)
+    largest, at, ulps, at_ulp, decreases = tanh_error(args.tanh_every)
+    checked = "every float32" if args.tanh_every == 1 else f"every {args.tanh_every}th float32"
+    print(f"tanh on {checked} of [0, 8]: largest error {largest:.2e} (at x = {at:.6g}), {ulps:.1f} ulp "
+          f"(at x = {at_ulp:.6g}); decreasing steps: {decreases}")
+    actions(frames)
+    returns(args.episodes, args.steps)
+
+
+if __name__ == "__main__":
+    main()
