@@ -425,7 +425,7 @@ def main() -> int:
         stock, fast = capped_loop_rates("hebbian", args.rounds, args.episodes, args.length, fast_conv=True)
         summary(f"training loop, episodes capped at {args.length} steps, hebbian, the fast class with --fast_conv "
                 "against the stock class with torch", stock, fast, LOOP_TARGET)
-        projection((1 / statistics.median(stock), 1 / statistics.median(fast)), ", fast with --fast_conv")
+        projection((1 / statistics.median(stock), 1 / statistics.median(fast)), " with --fast_conv")
     for kind in ("static", "hebbian"):
         parts = policy_share(kind, args.share_steps)
         total = sum(parts.values())
