@@ -52,6 +52,7 @@ import gymnasium as gym
 from throughput import generation_tasks
 
 import envs
+from cli.flags import positive_int
 from envs import ProblemSpec
 from envs.make import STOCK_CAR_RACING_ID as STOCK_ID
 from envs.rollout import rollout
@@ -390,24 +391,22 @@ def summary(label: str, stock: list[float], fast: list[float], target: float | N
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
-    parser.add_argument("--rounds", type=int, default=5)
-    parser.add_argument("--steps", type=int, default=300, help="environment steps per class and round")
-    parser.add_argument("--resets", type=int, default=4, help="resets per class and round")
-    parser.add_argument("--popsize", type=int, default=8, help="episodes per generation-0 training-loop round")
-    parser.add_argument("--episodes", type=int, default=2, help="capped episodes per training-loop round")
-    parser.add_argument("--length", type=int, default=300, help="steps of a capped episode")
-    parser.add_argument("--share_steps", type=int, default=600, help="steps measured for the policy's share")
+    parser.add_argument("--rounds", type=positive_int, default=5)
+    parser.add_argument("--steps", type=positive_int, default=300, help="environment steps per class and round")
+    parser.add_argument("--resets", type=positive_int, default=4, help="resets per class and round")
+    parser.add_argument("--popsize", type=positive_int, default=8, help="episodes per generation-0 training-loop round")
+    parser.add_argument("--episodes", type=positive_int, default=2, help="capped episodes per training-loop round")
+    parser.add_argument("--length", type=positive_int, default=300, help="steps of a capped episode")
+    parser.add_argument("--share_steps", type=positive_int, default=600, help="steps measured for the policy's share")
     parser.add_argument("--memory", action="store_true", help="also measure the paper's Hebbian run's memory")
     parser.add_argument("--fast_conv", action="store_true",
                         help="also the capped Hebbian loop and the projection with the opt-in compiled CNN")
     parser.add_argument("--identity", action="store_true", help="also compare long episodes frame by frame")
-    parser.add_argument("--episodes_compared", type=int, default=20, help="with --identity: how many episodes")
-    parser.add_argument("--frame_every", type=int, default=50, help="with --identity: compare render() this often")
+    parser.add_argument("--episodes_compared", type=positive_int, default=20,
+                        help="with --identity: how many episodes")
+    parser.add_argument("--frame_every", type=positive_int, default=50,
+                        help="with --identity: compare render() this often")
     args = parser.parse_args()
-    for name in ("rounds", "steps", "resets", "popsize", "episodes", "length", "share_steps", "episodes_compared",
-                 "frame_every"):
-        if getattr(args, name) < 1:
-            parser.error(f"--{name} must be at least 1, got {getattr(args, name)}")
     summary("environment (env.step)", *env_rates(args.rounds, args.steps), ENV_TARGET)
     summary("environment (env.reset)", *reset_rates(args.rounds, args.resets), RESET_TARGET, unit="resets")
     for kind in ("static", "hebbian"):

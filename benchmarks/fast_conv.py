@@ -28,6 +28,7 @@ from numba import njit
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from cli.flags import positive_int
 from envs import ProblemSpec, rollout
 from policies import PolicySettings
 from policies.conv import ConvFeatures, rational_tanh
@@ -153,11 +154,12 @@ def returns(episodes: int, steps: int) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rounds", type=int, default=5)
-    parser.add_argument("--frames", type=int, default=300, help="CarRacing frames timed per path and round")
-    parser.add_argument("--episodes", type=int, default=3, help="episodes per network and path")
-    parser.add_argument("--steps", type=int, default=300, help="the episodes' cap")
-    parser.add_argument("--tanh_every", type=int, default=64, help="1: every float32 of [0, 8] (about a minute)")
+    parser.add_argument("--rounds", type=positive_int, default=5)
+    parser.add_argument("--frames", type=positive_int, default=300, help="CarRacing frames timed per path and round")
+    parser.add_argument("--episodes", type=positive_int, default=3, help="episodes per network and path")
+    parser.add_argument("--steps", type=positive_int, default=300, help="the episodes' cap")
+    parser.add_argument("--tanh_every", type=positive_int, default=64,
+                        help="1: every float32 of [0, 8] (about a minute)")
     args = parser.parse_args()
     frames = observations(args.frames)
     speed(frames, args.rounds)

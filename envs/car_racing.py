@@ -355,6 +355,7 @@ def _dashboard(vx, vy, omega0, omega1, omega2, omega3, angle, spin):
     true_speed = math.sqrt(vx * vx + vy * vy)  # np.sqrt(np.square(vx) + np.square(vy))
     values = (1.0, true_speed, omega0, omega1, omega2, omega3, angle, spin)
     corners = np.empty((8, 8), dtype=np.float64)  # per shown polygon: x, y of its 4 corners in order
+    colors = np.empty(8, dtype=np.int64)
     kept = 0
     for index in range(8):
         value = values[index]
@@ -363,6 +364,7 @@ def _dashboard(vx, vy, omega0, omega1, omega2, omega3, angle, spin):
         if index == 0:  # [(W, H), (W, H - 5 h), (0, H - 5 h), (0, H)]
             left, right, top, bottom = 0.0, float(_W), _H - 5 * h, float(_H)
             corners[kept] = (right, bottom, right, top, left, top, left, bottom)
+            colors[kept] = _DASHBOARD_COLORS[index]
             kept += 1
             continue
         if index < 6:  # vertical(place, scaled value)
@@ -374,22 +376,18 @@ def _dashboard(vx, vy, omega0, omega1, omega2, omega3, angle, spin):
             scaled = -10.0 * value if index == 6 else -0.8 * value
             left, right, top, bottom = (place + 0) * s, (place + scaled) * s, _H - 4 * h, _H - 2 * h
         corners[kept] = (left, top, right, top, right, bottom, left, bottom)
+        colors[kept] = _DASHBOARD_COLORS[index]
         kept += 1
     xs, ys = np.empty(4 * kept, dtype=np.int64), np.empty(4 * kept, dtype=np.int64)
-    colors = np.empty(kept, dtype=np.int64)
-    fits, polygon = True, 0
-    for index in range(8):
-        if not abs(values[index]) > 1e-4:
-            continue
-        colors[polygon] = _DASHBOARD_COLORS[index]
+    fits = True
+    for polygon in range(kept):
         for corner in range(4):
             x, y = corners[polygon, 2 * corner], corners[polygon, 2 * corner + 1]
             if not (abs(x) < _COMPILED_BOUND and abs(y) < _COMPILED_BOUND):  # NaN too
                 fits = False
                 x, y = 0.0, 0.0
             xs[4 * polygon + corner], ys[4 * polygon + corner] = int(x), int(y)  # truncation, as pygame
-        polygon += 1
-    return fits, xs, ys, np.arange(kept + 1) * 4, colors, np.zeros(kept, dtype=np.bool_)
+    return fits, xs, ys, np.arange(kept + 1) * 4, colors[:kept], np.zeros(kept, dtype=np.bool_)
 
 
 def _grass_corners() -> np.ndarray:

@@ -76,7 +76,7 @@ def _lane(spread, lane):
     return (spread >> (16 * lane)) & _LANE
 
 
-@njit(**_FLAGS)
+@njit(inline="always")
 def _output(accumulated, value, weight, reciprocal):
     """One channel of a written pixel: ``mulhi(4 v, w) + acc``, ``mulhi(., recip)``, packus."""
     total = (((4 * value * weight) >> 16) + accumulated) & _LANE
@@ -144,9 +144,8 @@ def _exact_pixel(row, column, x_schedule):
 
 @njit(inline="always")
 def _channel(sums, carry, value, weight, reciprocal):
-    """``_output`` of one channel whose carried part is ``carry`` (inlined: a call per channel costs)."""
-    total = (((4 * value * weight) >> 16) + ((sums + carry) & _LANE)) & _LANE
-    return min((total * reciprocal) >> 16, 255)
+    """``_output`` of one channel whose carried part is ``carry``."""
+    return _output((sums + carry) & _LANE, value, weight, reciprocal)
 
 
 @njit(inline="always")

@@ -68,7 +68,7 @@ class HebbianPolicy(Policy):
         self.init_weights = init_weights
         self.normalise = normalise
         self.fast_conv = fast_conv  # the CNN's compiled pass (policies.conv)
-        self.worker_modules = conv_modules(fast_conv) if net.pixels else ()
+        self.worker_modules = conv_modules(net, fast_conv)
         n_syn, k = net.n_synapses, self.rule.n_coeffs
         parts: list[tuple[str, tuple[int, ...]]] = [("coefficients", (n_syn, k))]
         if init_weights == COEVOLVE:

@@ -36,10 +36,11 @@ MODERN = "beyond the original algorithm (defaults: the original)"
 class Network:
     build: Callable[[NetworkSpec], Policy]
     preprocessing: str = "default"  # the images it is fed: envs.recipes.PREPROCESSING
+    fast_conv: bool = False  # its CNN is the one --fast_conv computes (build takes fast_conv=True)
 
 
 NETWORKS: dict[str, Network] = {
-    "default": Network(StaticPolicy),
+    "default": Network(StaticPolicy, fast_conv=True),
     "small": Network(SmallNetPolicy),
     "lstm": Network(ConvLSTMPolicy, preprocessing="pytorch-es"),
 }
@@ -138,7 +139,7 @@ KINDS: dict[str, Kind] = {
 
 
 def fast_conv_option(settings: PolicySettings) -> dict:
-    """The default network's keyword for ``--fast_conv`` (the other networks have no such CNN: ``check_fast_conv``)."""
+    """The keyword for ``--fast_conv`` of a network that has its CNN (``check_fast_conv`` refuses the others)."""
     return {"fast_conv": True} if settings.fast_conv else {}
 
 
@@ -147,7 +148,7 @@ def check_fast_conv(settings: PolicySettings, net: NetworkSpec) -> None:
     if not net.pixels:
         raise ValueError(f"--fast_conv computes the CNN of pixel observations, but these observations are vectors "
                          f"{net.obs_shape}; leave --fast_conv out")
-    if settings.network != "default":
+    if not network_of(settings).fast_conv:
         raise ValueError(f"--fast_conv computes the default network's CNN, which --network {settings.network} does "
                          "not have; leave --fast_conv out")
 

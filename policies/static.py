@@ -68,7 +68,7 @@ class StaticPolicy(WeightFile):
         net.check_cnn_input()
         self.net = net
         self.fast_conv = fast_conv  # the CNN's compiled pass (policies.conv)
-        self.worker_modules = conv_modules(fast_conv) if net.pixels else ()
+        self.worker_modules = conv_modules(net, fast_conv)
         conv = [(f"conv{i + 1}", shape) for i, shape in enumerate(net.conv_shapes)] if net.pixels else []
         dense = [(f"fc{i + 1}", shape) for i, shape in enumerate(net.layer_shapes)]
         self.layout = Layout(conv + dense)

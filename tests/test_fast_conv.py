@@ -20,7 +20,7 @@ import pytest
 from envs import ProblemSpec
 from es.loop import EVAL_SEEDS, EVAL_STREAM, stream_rng
 from policies import PolicySettings, make_policy
-from policies.conv import ConvFeatures, _conv1, _conv2, _tanh_of_pooled, fast_features, rational_tanh
+from policies.conv import ConvFeatures, _convolve, _tanh_of_pooled, fast_features, rational_tanh
 from policies.kernels import _TANH_CLAMP, _TANH_P, _TANH_Q
 from policies.network import NetworkSpec, conv_shapes
 from tests.test_pinned import CASES, PINNED, parameters_hash, train
@@ -123,11 +123,11 @@ def test_the_pass_is_the_equations():
     conv1 = rng.standard_normal((6, 3, 3, 3)).astype(np.float32)
     conv2 = rng.standard_normal((8, 6, 5, 5)).astype(np.float32)
     planes1 = np.empty((6, 82, 82), np.float32)
-    _conv1(frame, conv1, planes1)
+    _convolve(planes1, frame, conv1, 82, 3, 1)
     np.testing.assert_array_equal(planes1, reference_conv(frame, conv1, 1))
     pooled1 = reference_pool(reference_tanh(planes1))
     planes2 = np.empty((8, 18, 18), np.float32)
-    _conv2(pooled1, conv2, planes2)
+    _convolve(planes2, pooled1, conv2, 18, 5, 2)
     full2 = reference_conv(pooled1, conv2, 2)
     assert full2.shape == (8, 19, 19)
     np.testing.assert_array_equal(planes2, full2[:, :18, :18])  # the 19th row and column: dropped by the pooling
