@@ -7,9 +7,9 @@
     python benchmarks/car_racing.py --fast_conv   # and the Hebbian loop with the opt-in compiled CNN
 
 Gymnasium's class is ``CarRacingStock-v3``, the project's ``CarRacing-v3``. Everything is timed in
-CPU time of this process, the two classes alternating (round by round for the environment, episode
-by episode for the training loops) so that this machine's drift and other load fall on both alike;
-the medians over rounds are printed.
+CPU time of this process, the two classes alternating (every 25 steps for ``env.step``, round by
+round for resets, episode by episode for the training loops) so that this machine's drift and other
+load fall on both alike; the medians over rounds are printed.
 
 - environment: ``env.step`` of each class, the same seeds and random actions (resets untimed), and
   ``env.reset`` (track generation, tile bodies, the first frame) on the same seeds;
@@ -78,30 +78,36 @@ def random_actions(rng: np.random.Generator, steps: int) -> np.ndarray:
     return np.stack([steer, gas, brake], axis=1).astype(np.float32)
 
 
-def timed_steps(env: gym.Env, seed: int, actions: np.ndarray) -> tuple[float, int]:
-    """CPU seconds of ``env.step`` over ``actions`` from ``reset(seed)``, resetting (untimed) on an end."""
+def timed_steps(env: gym.Env, seed: int, actions: np.ndarray, chunk: int):
+    """CPU seconds of ``env.step`` over each ``chunk`` of ``actions`` in turn (a generator), from
+    ``reset(seed)``, resetting (untimed) on an end."""
     env.reset(seed=seed)
-    seconds = 0.0
-    for action in actions:
-        started = time.process_time()
-        _, _, terminated, truncated, _ = env.step(action)
-        seconds += time.process_time() - started
-        if terminated or truncated:
-            seed += 1000
-            env.reset(seed=seed)
-    return seconds, len(actions)
+    for start in range(0, len(actions), chunk):
+        seconds = 0.0
+        for action in actions[start:start + chunk]:
+            started = time.process_time()
+            _, _, terminated, truncated, _ = env.step(action)
+            seconds += time.process_time() - started
+            if terminated or truncated:
+                seed += 1000
+                env.reset(seed=seed)
+        yield seconds
 
 
-def env_rates(rounds: int, steps: int) -> tuple[list[float], list[float]]:
-    """Steps per CPU second of each class, per round, the same seeds and actions for both."""
+def env_rates(rounds: int, steps: int, chunk: int = 25) -> tuple[list[float], list[float]]:
+    """Steps per CPU second of each class, per round, the same seeds and actions for both, the two
+    classes alternating every ``chunk`` steps (a round of the stock class lasts seconds: the load
+    of this machine changes within one)."""
     stock, fast = make(STOCK_ID), make(FAST_ID)
-    timed_steps(fast, 0, random_actions(np.random.default_rng(0), 5))  # warm-up: numba's compiled code
+    sum(timed_steps(fast, 0, random_actions(np.random.default_rng(0), 5), 5))  # warm-up: numba's compiled code
     stock_rates, fast_rates = [], []
     for round_index in range(rounds):
         actions = random_actions(np.random.default_rng(500 + round_index), steps)
-        for env, rates in ((stock, stock_rates), (fast, fast_rates)):
-            seconds, count = timed_steps(env, 500 + round_index, actions)
-            rates.append(count / seconds)
+        chunks = zip(timed_steps(stock, 500 + round_index, actions, chunk),
+                     timed_steps(fast, 500 + round_index, actions, chunk))
+        stock_seconds, fast_seconds = (sum(seconds) for seconds in zip(*chunks))
+        stock_rates.append(len(actions) / stock_seconds)
+        fast_rates.append(len(actions) / fast_seconds)
     stock.close()
     fast.close()
     return stock_rates, fast_rates

@@ -31,7 +31,7 @@ import numpy as np
 from numba import njit
 from numba.cpython.unsafe.numbers import trailing_zeros
 
-from envs.pygame_raster import SPAN_BITS, blend, draw_polygon, gfx_aapolygon, gfx_filled_polygon
+from envs.pygame_raster import SPAN_BITS, append, blend, draw_polygon, gfx_aapolygon, gfx_filled_polygon
 
 _FLAGS = {"cache": True, "nogil": True}
 _ONE = 0x4000  # the SSE2 filter's unit: a source pixel is 0x4000
@@ -329,7 +329,9 @@ class SpanObservation:
                       np.empty((_PALETTE, columns), dtype=np.int64),
                       np.full(2 * _RECENT, -1, dtype=np.int64), int(whole.min()) if len(whole) else 0)
         self._work[4][0] = 0
-        self._before, self._between = np.empty(height, dtype=np.int64), np.empty(height, dtype=np.int64)
+        # record_polygons' scratch: one polygon's fill, one span per row, and the cover it makes
+        self._fill = (np.empty((height, 1), dtype=np.int64), np.empty(height, dtype=np.int64), height, width)
+        self._cover = np.empty((2, height), dtype=np.int64)
 
     def target(self) -> tuple:
         """An empty span list for ``envs.pygame_raster``'s drawing functions."""
@@ -338,7 +340,7 @@ class SpanObservation:
 
     def record_polygons(self, target: tuple, flip: bool, *polygons) -> None:
         """``pygame_raster.draw_polygons``'s arguments after the target and flip."""
-        record_polygons(target, flip, *polygons, self._before, self._between)
+        record_polygons(target, flip, *polygons, self._fill, self._cover)
 
     def overflowed(self) -> bool:
         """True (and the list grown) if the last drawing recorded more spans in a row than it could keep."""
@@ -356,23 +358,42 @@ class SpanObservation:
 
 
 @njit(**_FLAGS)
-def record_polygons(spans, flip, xs, ys, starts, colors, antialiased, before, between):
+def record_polygons(spans, flip, xs, ys, starts, colors, antialiased, fill, cover):
     """``pygame_raster.draw_polygons`` into a span list, less what cannot show.
 
     An anti-aliased polygon's edge pixels that its own fill, drawn right after them, covers are
-    never seen: they are dropped (``before``, ``between``: int64 scratch of the picture's height).
+    never seen. The fill is drawn first into ``fill`` (a span list of one record per row, of the
+    picture's height); where it has at most one span per row, those spans are the ``cover`` (int64
+    (2, height)) behind which the edge is drawn, which leaves those pixels out, and then they are
+    recorded. Otherwise the edge and the fill are recorded in order, and the hidden pixels removed
+    (``_drop_covered``).
     """
-    records, counts, height = spans[0], spans[1], spans[2]
+    records, counts, height, width = spans
+    fill_records, fill_counts = fill[0], fill[1]
+    mask = (1 << SPAN_BITS) - 1
     for k in range(colors.shape[0]):
         polygon_xs, polygon_ys = xs[starts[k]:starts[k + 1]], ys[starts[k]:starts[k + 1]]
         if not antialiased[k]:
             draw_polygon(spans, flip, polygon_xs, polygon_ys, colors[k])
             continue
-        low, high = max(polygon_ys.min() - 1, 0), min(polygon_ys.max() + 1, height - 1)
+        low, high = max(polygon_ys.min() - 1, 0), min(polygon_ys.max() + 1, height - 1)  # the edge's rows
         if low > high:
             continue
         if flip:  # the rows of the records
             low, high = height - 1 - high, height - 1 - low
+        fill_counts[low:high + 1] = 0
+        gfx_filled_polygon(fill, flip, polygon_xs, polygon_ys, colors[k])
+        if fill_counts[low:high + 1].max() <= 1:
+            for row in range(low, high + 1):
+                span = fill_records[row, 0]
+                cover[0, row], cover[1, row] = (span & mask, (span >> SPAN_BITS) & mask) if fill_counts[row] else (
+                    width, -1)
+            gfx_aapolygon((records, counts, height, width, cover), flip, polygon_xs, polygon_ys, colors[k])
+            for row in range(low, high + 1):
+                if fill_counts[row]:
+                    append(records, counts, row, fill_records[row, 0])
+            continue
+        before, between = cover[0], cover[1]
         before[low:high + 1] = counts[low:high + 1]
         gfx_aapolygon(spans, flip, polygon_xs, polygon_ys, colors[k])
         between[low:high + 1] = counts[low:high + 1]
@@ -387,6 +408,18 @@ def _drop_covered(records, counts, row, first, fills):
     records fills..counts[row] - 1 (the polygon's own fill, opaque, drawn after them)."""
     end = min(counts[row], records.shape[1])
     if fills >= end or first >= fills:
+        return
+    mask = (1 << SPAN_BITS) - 1
+    if end == fills + 1 and end == counts[row]:  # one span of fill (a convex polygon's row)
+        fill = records[row, fills]
+        fill_x1, fill_x2 = fill & mask, (fill >> SPAN_BITS) & mask
+        kept = first
+        for index in range(first, fills):  # without a branch per record: half of them are dropped
+            record = records[row, index]
+            records[row, kept] = record
+            kept += 1 - ((fill_x1 <= (record & mask)) & (((record >> SPAN_BITS) & mask) <= fill_x2))
+        records[row, kept] = fill
+        counts[row] = kept + 1
         return
     kept = first
     for index in range(first, end):

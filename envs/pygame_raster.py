@@ -67,12 +67,17 @@ def blend(old, color, alpha):
             | _blend_channel(old, color, _BLUE, 0, alpha))
 
 
-# --- the two targets ---------------------------------------------------------------------------
-# A target is either a (height, width) uint32 array of pixels, written at once, or a span list
-# ``(records, counts, height, width)``: row y's writes, in order, are ``records[y, :counts[y]]``,
-# each one int64 (``span_record``; width at most 1024, colours of 24 bits). Past a row's capacity
-# writes are counted, not stored, so that the caller can grow the list and draw again. The drawing
-# code is the same for both.
+# --- the targets -------------------------------------------------------------------------------
+# A target is one of:
+# - a (height, width) uint32 array of pixels, written at once;
+# - a span list ``(records, counts, height, width)``: row y's writes, in order, are
+#   ``records[y, :counts[y]]``, each one int64 (``span_record``; width at most 1024, colours of 24
+#   bits). Past a row's capacity writes are counted, not stored, so that the caller can grow the
+#   list and draw again;
+# - a span list behind a cover ``(records, counts, height, width, cover)``: the same, less the
+#   writes that lie wholly within ``cover[0, y]..cover[1, y]`` (int64, (2, height)), which the caller
+#   knows an opaque span it records after them hides.
+# The drawing code is the same for all.
 
 SPAN_BITS = 10  # bits of x1 and of x2 in a span record
 
@@ -95,6 +100,10 @@ def _put_blend(target, flip, x, y, color, alpha):
     """One pixel (clipped) blended at alpha < 255."""
 
 
+def _put_record(target, row, x1, x2, color, alpha):
+    """A write into row ``row`` of a span list (with or without a cover)."""
+
+
 @overload(_size, jit_options=_FLAGS)
 def _size_overload(target):
     if isinstance(target, types.Array):
@@ -110,7 +119,7 @@ def _put_span_overload(target, flip, y, x1, x2, color):
         return write
 
     def record(target, flip, y, x1, x2, color):
-        _record(target[0], target[1], _row(target[2], flip, y), x1, x2, color, 255)
+        _put_record(target, _row(target[2], flip, y), x1, x2, color, 255)
     return record
 
 
@@ -123,16 +132,40 @@ def _put_blend_overload(target, flip, x, y, color, alpha):
         return write
 
     def record(target, flip, x, y, color, alpha):
-        _record(target[0], target[1], _row(target[2], flip, y), x, x, color, alpha)
+        _put_record(target, _row(target[2], flip, y), x, x, color, alpha)
     return record
+
+
+@overload(_put_record, jit_options=_FLAGS)
+def _put_record_overload(target, row, x1, x2, color, alpha):
+    if len(target) == 5:
+        return lambda target, row, x1, x2, color, alpha: _record_behind(target[0], target[1], target[4], row, x1,
+                                                                        x2, color, alpha)
+    return lambda target, row, x1, x2, color, alpha: _record(target[0], target[1], row, x1, x2, color, alpha)
 
 
 @njit(**_FLAGS)
 def _record(records, counts, row, x1, x2, color, alpha):
+    append(records, counts, row, span_record(x1, x2, color, alpha))
+
+
+@njit(**_FLAGS)
+def append(records, counts, row, record):
+    """Add ``record`` to row ``row`` of a span list (past its capacity, only counted)."""
     index = counts[row]
     counts[row] = index + 1
     if index < records.shape[1]:
-        records[row, index] = span_record(x1, x2, color, alpha)
+        records[row, index] = record
+
+
+@njit(**_FLAGS)
+def _record_behind(records, counts, cover, row, x1, x2, color, alpha):
+    """``_record`` unless ``cover`` holds x1..x2 in this row. Without a branch on that: an early
+    return here keeps LLVM from inlining the drawing's calls, which then cost ten times as much."""
+    index = counts[row]
+    counts[row] = index + 1 - ((cover[0, row] <= x1) & (x2 <= cover[1, row]))
+    if index < records.shape[1]:
+        records[row, index] = span_record(x1, x2, color, alpha)  # (overwritten next if not counted)
 
 
 @njit(**_FLAGS)
@@ -197,13 +230,52 @@ def _row_crossings(xs, ys, y, high, crossings, gfx):
 
 @njit(**_FLAGS)
 def gfx_filled_polygon(pixels, flip, xs, ys, color):
-    """``pygame.gfxdraw.filled_polygon`` (SDL_gfx ``filledPolygonColorMT``) of integer vertices."""
+    """``pygame.gfxdraw.filled_polygon`` (SDL_gfx ``filledPolygonColorMT``) of integer vertices.
+
+    SDL_gfx computes each row's crossings as ``(65536 (y - y1)) / (y2 - y1) * (x2 - x1) + 65536
+    x1`` (``_row_crossings``); here each edge carries that quotient and its remainder from row to
+    row (adding ``65536 // d`` and ``65536 % d``): the same integers without a division per row.
+    """
     count = xs.shape[0]
     low, high = ys.min(), ys.max()
+    first, last = max(low, 0), min(high, _size(pixels)[0] - 1)
+    if first > last:
+        return  # rows off the surface draw nothing: they are not scanned
+    # per edge, taken from its upper corner (a column each): its first row, its last row counted,
+    # 65536 x1, x2 - x1, y2 - y1, the quotient and remainder at the row scanned, their steps
+    edges = np.empty((9, count), dtype=np.int64)
+    top, bottom, origin, run, rise, quotient, remainder, step, carry = edges
     crossings = np.empty(count, dtype=np.int64)
-    # rows off the surface draw nothing: skip them instead of scanning them
-    for y in range(max(low, 0), min(high, _size(pixels)[0] - 1) + 1):
-        found = _row_crossings(xs, ys, y, high, crossings, True)
+    active = 0
+    for i in range(count):
+        previous = count - 1 if i == 0 else i - 1
+        x1, y1, x2, y2 = xs[previous], ys[previous], xs[i], ys[i]
+        if y1 > y2:
+            x1, y1, x2, y2 = x2, y2, x1, y1
+        if y1 == y2:
+            continue
+        start = max(y1, first)
+        top[active], bottom[active] = y1, (y2 if y2 == high else y2 - 1)
+        origin[active], run[active], rise[active] = 65536 * x1, x2 - x1, y2 - y1
+        quotient[active], remainder[active] = divmod(65536 * (start - y1), y2 - y1)
+        step[active], carry[active] = divmod(65536, y2 - y1)
+        active += 1
+    for y in range(first, last + 1):
+        found = 0
+        for e in range(active):
+            if top[e] <= y:
+                if y <= bottom[e]:
+                    crossings[found] = quotient[e] * run[e] + origin[e]
+                    found += 1
+                more = remainder[e] + carry[e]
+                wraps = more >= rise[e]  # (no branch: it would be mispredicted)
+                quotient[e] += step[e] + wraps
+                remainder[e] = more - rise[e] * wraps
+        if found == 2:  # a convex polygon's row
+            left, right = crossings[0], crossings[1]
+            crossings[0], crossings[1] = min(left, right), max(left, right)
+        else:
+            _sort(crossings, found)
         for i in range(0, found - 1, 2):
             left = crossings[i] + 1
             left = (left >> 16) + ((left & 32768) >> 15)

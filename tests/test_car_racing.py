@@ -342,6 +342,57 @@ def test_span_observation_is_smoothscale_of_pygames_drawing():
         assert np.array_equal(got, expected), trial
 
 
+def test_recorded_spans_are_the_drawing_less_the_edges_its_own_fill_hides():
+    """``record_polygons`` (edges drawn behind a cover made of the fill, or, for a row of several
+    fill spans, drawn whole and then dropped) keeps exactly the records ``draw_polygons`` makes,
+    less each anti-aliased polygon's edge records that lie within one of its own fill's spans in
+    that row: filtered here record by record, in plain Python."""
+    rng = np.random.default_rng(31)
+    width, height = 1000, 800
+    spans = SpanObservation(width, height, 96, 96, capacity=4)  # small: the list must grow
+
+    def drawn(draw, flip, xs, ys, color) -> list[list[int]]:
+        records, counts = np.empty((height, 4096), dtype=np.int64), np.zeros(height, dtype=np.int64)
+        draw((records, counts, height, width), flip, xs, ys, color)
+        return [records[row, :counts[row]].tolist() for row in range(height)]
+
+    def ends(record: int) -> tuple[int, int]:  # pygame_raster.span_record's x1, x2
+        mask = (1 << pygame_raster.SPAN_BITS) - 1
+        return record & mask, (record >> pygame_raster.SPAN_BITS) & mask
+
+    several = 0
+    for trial in range(40):
+        polygons = [random_polygon(rng, width, height) for _ in range(int(rng.integers(1, 12)))]
+        colors = rng.integers(0, 1 << 24, size=len(polygons))
+        smooth = rng.random(len(polygons)) < 0.8
+        corners = np.trunc(np.concatenate(polygons)).astype(np.int64)
+        xs, ys = corners[:, 0].copy(), corners[:, 1].copy()
+        starts = np.cumsum([0] + [len(p) for p in polygons])
+        flip = bool(trial % 2)
+        expected = [[] for _ in range(height)]
+        for k, color in enumerate(colors):
+            corners_k = (xs[starts[k]:starts[k + 1]], ys[starts[k]:starts[k + 1]])
+            if not smooth[k]:
+                for row, records in enumerate(drawn(pygame_raster.draw_polygon, flip, *corners_k, color)):
+                    expected[row] += records
+                continue
+            edges = drawn(pygame_raster.gfx_aapolygon, flip, *corners_k, color)
+            fills = drawn(pygame_raster.gfx_filled_polygon, flip, *corners_k, color)
+            for row in range(height):
+                inside = [ends(record) for record in fills[row]]
+                several += len(inside) > 1 and len(edges[row]) > 0
+                expected[row] += [record for record in edges[row]
+                                  if not any(a <= ends(record)[0] and ends(record)[1] <= b for a, b in inside)]
+                expected[row] += fills[row]
+        while True:
+            spans.record_polygons(spans.target(), flip, xs, ys, starts, colors, smooth)
+            if not spans.overflowed():
+                break
+        got = [spans.records[row, :spans.counts[row]].tolist() for row in range(height)]
+        assert got == expected, trial
+    assert several > 0  # rows of several fill spans (non-convex polygons) were met
+
+
 def expected_surface_pixel(color) -> int:
     return (color[0] << 16) | (color[1] << 8) | color[2]
 
