@@ -370,7 +370,6 @@ def record_polygons(spans, flip, xs, ys, starts, colors, antialiased, fill, cove
     """
     records, counts, height, width = spans
     fill_records, fill_counts = fill[0], fill[1]
-    mask = (1 << SPAN_BITS) - 1
     for k in range(colors.shape[0]):
         polygon_xs, polygon_ys = xs[starts[k]:starts[k + 1]], ys[starts[k]:starts[k + 1]]
         if not antialiased[k]:
@@ -385,9 +384,8 @@ def record_polygons(spans, flip, xs, ys, starts, colors, antialiased, fill, cove
         gfx_filled_polygon(fill, flip, polygon_xs, polygon_ys, colors[k])
         if fill_counts[low:high + 1].max() <= 1:
             for row in range(low, high + 1):
-                span = fill_records[row, 0]
-                cover[0, row], cover[1, row] = (span & mask, (span >> SPAN_BITS) & mask) if fill_counts[row] else (
-                    width, -1)
+                cover[0, row], cover[1, row], _, _ = _unpack(fill_records[row, 0]) if fill_counts[row] else (
+                    width, -1, 0, 0)  # (an empty row covers nothing)
             gfx_aapolygon((records, counts, height, width, cover), flip, polygon_xs, polygon_ys, colors[k])
             for row in range(low, high + 1):
                 if fill_counts[row]:
@@ -408,18 +406,6 @@ def _drop_covered(records, counts, row, first, fills):
     records fills..counts[row] - 1 (the polygon's own fill, opaque, drawn after them)."""
     end = min(counts[row], records.shape[1])
     if fills >= end or first >= fills:
-        return
-    mask = (1 << SPAN_BITS) - 1
-    if end == fills + 1 and end == counts[row]:  # one span of fill (a convex polygon's row)
-        fill = records[row, fills]
-        fill_x1, fill_x2 = fill & mask, (fill >> SPAN_BITS) & mask
-        kept = first
-        for index in range(first, fills):  # without a branch per record: half of them are dropped
-            record = records[row, index]
-            records[row, kept] = record
-            kept += 1 - ((fill_x1 <= (record & mask)) & (((record >> SPAN_BITS) & mask) <= fill_x2))
-        records[row, kept] = fill
-        counts[row] = kept + 1
         return
     kept = first
     for index in range(first, end):
