@@ -429,6 +429,7 @@ class FastCarRacing(stock.CarRacing):
         self._road_color_rows: np.ndarray | None = None  # the same colours as rows, when made so
         self._car_source: car_dynamics.Car | None = None
         self._car_fixtures: tuple = ()  # owners, starts, local corners (_car_screen)
+        self._car_colors: tuple | None = None  # (the colours, their pixel values): _car_pixel_values
         self._grass_corners = _grass_corners()
         self._playfield = _playfield_corners()
         self._tile_body = car_racing_track.static_body_def()
@@ -712,17 +713,26 @@ class FastCarRacing(stock.CarRacing):
                                   np.cumsum([0] + [len(corners) for _, corners in fixtures]),
                                   np.concatenate([corners for _, corners in fixtures]).reshape(-1, 2))
             self._car_source = self.car
-        poses = np.array([(t.q.c, t.q.s, t.position[0], t.position[1]) for t in (body.transform for body in bodies)],
+        poses = np.array([(rotation.c, rotation.s, position.x, position.y)
+                          for rotation, position in ((t.q, t.position) for t in (body.transform for body in bodies))],
                          dtype=np.float32)
         phased = ["phase" in body.__dict__ for body in bodies]
         phases = np.array([body.phase if wheel else 0.0 for body, wheel in zip(bodies, phased)], dtype=np.float64)
-        colors = [self._draw_pixel([int(c * 255) for c in body.color]) for body in bodies]
-        white = self._draw_pixel(list(car_dynamics.WHEEL_WHITE))
-        if None in colors or white is None:
+        colors = self._car_pixel_values(tuple(tuple(body.color) for body in bodies), car_dynamics.WHEEL_WHITE)
+        if colors is None:
             return None
-        values = np.array(colors, dtype=np.int64)
-        return _car_screen(*self._car_fixtures, poses, np.array(phased), phases, values, white,
-                           *_rotation(angle), zoom, *translation)
+        return _car_screen(*self._car_fixtures, poses, np.array(phased), phases, *colors, *_rotation(angle), zoom,
+                           *translation)
+
+    def _car_pixel_values(self, colors: tuple, white) -> tuple[np.ndarray, int] | None:
+        """The bodies' pixels and the wheel mark's, as ``Car.draw`` makes them (``int(c * 255)``)
+        of these colours, or None; made again only when a colour changes."""
+        if self._car_colors is None or self._car_colors[0] != (colors, white):
+            pixels = [self._draw_pixel([int(c * 255) for c in color]) for color in colors]
+            white_pixel = self._draw_pixel(list(white))
+            values = None if None in pixels or white_pixel is None else (np.array(pixels, dtype=np.int64), white_pixel)
+            self._car_colors = ((colors, white), values)
+        return self._car_colors[1]
 
     @staticmethod
     def _draw_pixel(color: list) -> int | None:
