@@ -203,12 +203,13 @@ def _sort(values, count):
 
 
 @njit(**_FLAGS)
-def _row_crossings(xs, ys, y, high, crossings, gfx):
-    """Where row ``y`` crosses the polygon's edges, sorted, in ``crossings``; their number.
+def _row_crossings(xs, ys, y, high, crossings):
+    """Where row ``y`` crosses the polygon's edges in pygame's ``draw_fillpoly``, sorted, in
+    ``crossings``; their number.
 
-    Both scanline fills take an edge from its upper corner, skip horizontal ones, count an edge for
-    y1 <= y < y2 and, on the last row, for y == y2. SDL_gfx (``gfx``) keeps the crossing in 16.16
-    fixed point; pygame's ``draw_fillpoly`` divides in float32 and rounds alternately down and up.
+    Both scanline fills (this and SDL_gfx's, ``gfx_filled_polygon``) take an edge from its upper
+    corner, skip horizontal ones, count an edge for y1 <= y < y2 and, on the last row, for y == y2.
+    pygame divides in float32 and rounds alternately down and up.
     """
     found = 0
     for i in range(xs.shape[0]):
@@ -218,11 +219,8 @@ def _row_crossings(xs, ys, y, high, crossings, gfx):
             x1, y1, x2, y2 = x2, y2, x1, y1
         if y1 == y2 or not ((y1 <= y < y2) or (y == high and y == y2)):
             continue
-        if gfx:
-            crossings[found] = (65536 * (y - y1)) // (y2 - y1) * (x2 - x1) + 65536 * x1
-        else:
-            crossing = np.float32((y - y1) * (x2 - x1)) / np.float32(y2 - y1)
-            crossings[found] = (math.floor(crossing) if found % 2 == 0 else math.ceil(crossing)) + x1
+        crossing = np.float32((y - y1) * (x2 - x1)) / np.float32(y2 - y1)
+        crossings[found] = (math.floor(crossing) if found % 2 == 0 else math.ceil(crossing)) + x1
         found += 1
     _sort(crossings, found)
     return found
@@ -232,9 +230,10 @@ def _row_crossings(xs, ys, y, high, crossings, gfx):
 def gfx_filled_polygon(pixels, flip, xs, ys, color):
     """``pygame.gfxdraw.filled_polygon`` (SDL_gfx ``filledPolygonColorMT``) of integer vertices.
 
-    SDL_gfx computes each row's crossings as ``(65536 (y - y1)) / (y2 - y1) * (x2 - x1) + 65536
-    x1`` (``_row_crossings``); here each edge carries that quotient and its remainder from row to
-    row (adding ``65536 // d`` and ``65536 % d``): the same integers without a division per row.
+    Its edges are counted on the rows ``_row_crossings`` says, and SDL_gfx computes each crossing in
+    16.16 fixed point as ``(65536 (y - y1)) / (y2 - y1) * (x2 - x1) + 65536 x1``; here each edge
+    carries that quotient and its remainder from row to row (adding ``65536 // d`` and ``65536 % d``):
+    the same integers without a division per row.
     """
     count = xs.shape[0]
     low, high = ys.min(), ys.max()
@@ -413,7 +412,7 @@ def draw_polygon(pixels, flip, xs, ys, color):
         return
     crossings = np.empty(count, dtype=np.int64)
     for y in range(max(low, 0), min(high, _size(pixels)[0] - 1) + 1):
-        found = _row_crossings(xs, ys, y, high, crossings, False)
+        found = _row_crossings(xs, ys, y, high, crossings)
         for i in range(0, found - 1, 2):
             _draw_hline(pixels, flip, crossings[i], y, crossings[i + 1], color)
     for i in range(count):
