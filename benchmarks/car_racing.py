@@ -7,9 +7,9 @@
     python benchmarks/car_racing.py --fast_conv   # and the Hebbian loop with the opt-in compiled CNN
 
 Gymnasium's class is ``CarRacingStock-v3``, the project's ``CarRacing-v3``. Everything is timed in
-CPU time of this process, the two classes alternating (every 25 steps for ``env.step``, round by
-round for resets, episode by episode for the training loops) so that this machine's drift and other
-load fall on both alike; the medians over rounds are printed.
+CPU time of this process, the two classes alternating (every 25 steps for ``env.step``, reset by
+reset, episode by episode for the training loops) so that this machine's drift and other load fall
+on both alike; the medians over rounds are printed.
 
 - environment: ``env.step`` of each class, the same seeds and random actions (resets untimed), and
   ``env.reset`` (track generation, tile bodies, the first frame) on the same seeds;
@@ -114,16 +114,20 @@ def env_rates(rounds: int, steps: int, chunk: int = 25) -> tuple[list[float], li
 
 
 def reset_rates(rounds: int, resets: int) -> tuple[list[float], list[float]]:
-    """Resets per CPU second of each class, per round, on the same seeds."""
+    """Resets per CPU second of each class, per round, on the same seeds, the two classes
+    alternating reset by reset."""
     stock, fast = make(STOCK_ID), make(FAST_ID)
     fast.reset(seed=0)  # warm-up
     rates: list[list[float]] = [[], []]
     for round_index in range(rounds):
-        for env, found in ((stock, rates[0]), (fast, rates[1])):
-            started = time.process_time()
-            for seed in range(resets):
-                env.reset(seed=900 + round_index * resets + seed)
-            found.append(resets / (time.process_time() - started))
+        seconds = [0.0, 0.0]
+        for seed in range(900 + round_index * resets, 900 + (round_index + 1) * resets):
+            for index, env in enumerate((stock, fast)):
+                started = time.process_time()
+                env.reset(seed=seed)
+                seconds[index] += time.process_time() - started
+        for found, spent in zip(rates, seconds):
+            found.append(resets / spent)
     stock.close()
     fast.close()
     return rates[0], rates[1]
@@ -399,7 +403,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument("--rounds", type=positive_int, default=5)
     parser.add_argument("--steps", type=positive_int, default=300, help="environment steps per class and round")
-    parser.add_argument("--resets", type=positive_int, default=4, help="resets per class and round")
+    parser.add_argument("--resets", type=positive_int, default=20, help="resets per class and round")
     parser.add_argument("--popsize", type=positive_int, default=8, help="episodes per generation-0 training-loop round")
     parser.add_argument("--episodes", type=positive_int, default=2, help="capped episodes per training-loop round")
     parser.add_argument("--length", type=positive_int, default=300, help="steps of a capped episode")
