@@ -225,6 +225,7 @@ def create_track(env: stock.CarRacing, body_def: b2BodyDef) -> tuple[np.ndarray,
     set_vertex, set_shape = shape.set_vertex, shape._b2PolygonShape__set_vertices_internal
     road_color, road, road_poly = env.road_color, env.road, env.road_poly
     white, red = (255, 255, 255), (255, 0, 0)
+    shades = [road_color + 0.01 * shade * 255 for shade in range(3)]  # the stock's per tile, i % 3 = shade
     colors = np.empty((len(tiles) + int(np.count_nonzero(~np.isnan(tiles[:, 8]))), 3))
     k = 0
     for i, row in enumerate(tiles.tolist()):
@@ -238,7 +239,7 @@ def create_track(env: stock.CarRacing, body_def: b2BodyDef) -> tuple[np.ndarray,
         body = create_body(body_def)
         fixture = create_fixture(body, fixture_def)
         body.userData = body
-        colors[k] = road_color + 0.01 * (i % 3) * 255
+        colors[k] = shades[i % 3]
         body.color = color = colors[k]
         k += 1
         body.road_visited = False
