@@ -393,7 +393,7 @@ def record_polygons(spans, flip, xs, ys, starts, colors, antialiased, fill, cove
                 if fill_counts[row]:
                     append(records, counts, row, fill_records[row, 0])
             continue
-        before, between = cover[0], cover[1]
+        before, between = cover[0], cover[1]  # (the cover's rows, unused on this path, as scratch)
         before[low:high + 1] = counts[low:high + 1]
         gfx_aapolygon(spans, flip, polygon_xs, polygon_ys, colors[k])
         between[low:high + 1] = counts[low:high + 1]

@@ -150,10 +150,11 @@ def _record(records, counts, row, x1, x2, color, alpha):
 
 
 @njit(**_FLAGS)
-def append(records, counts, row, record):
-    """Add ``record`` to row ``row`` of a span list (past its capacity, only counted)."""
+def append(records, counts, row, record, counted=1):
+    """Add ``record`` to row ``row`` of a span list (past its capacity, only counted); with
+    ``counted`` 0 it is written where the next record will overwrite it, and not counted."""
     index = counts[row]
-    counts[row] = index + 1
+    counts[row] = index + counted
     if index < records.shape[1]:
         records[row, index] = record
 
@@ -162,10 +163,8 @@ def append(records, counts, row, record):
 def _record_behind(records, counts, cover, row, x1, x2, color, alpha):
     """``_record`` unless ``cover`` holds x1..x2 in this row. Without a branch on that: an early
     return here keeps LLVM from inlining the drawing's calls, which then cost ten times as much."""
-    index = counts[row]
-    counts[row] = index + 1 - ((cover[0, row] <= x1) & (x2 <= cover[1, row]))
-    if index < records.shape[1]:
-        records[row, index] = span_record(x1, x2, color, alpha)  # (overwritten next if not counted)
+    hidden = (cover[0, row] <= x1) & (x2 <= cover[1, row])
+    append(records, counts, row, span_record(x1, x2, color, alpha), 1 - hidden)
 
 
 @njit(**_FLAGS)

@@ -56,17 +56,22 @@ def max_pool2(planes: np.ndarray) -> np.ndarray:
     """
     channels, height, width = planes.shape
     pooled = np.empty((channels, height // 2, width // 2), dtype=np.float32)
-    for channel in range(channels):
-        for row in range(height // 2):
-            for column in range(width // 2):
-                kept = np.float32(-np.inf)
-                for dy in range(2):
-                    for dx in range(2):
-                        value = planes[channel, 2 * row + dy, 2 * column + dx]
-                        if value > kept or np.isnan(value):
-                            kept = value
-                pooled[channel, row, column] = kept
+    _pool_into(planes, pooled)
     return pooled
+
+
+@njit(cache=True, nogil=True)
+def _pool_into(planes: np.ndarray, pooled: np.ndarray) -> None:
+    """``max_pool2`` of ``planes`` into ``pooled`` (C, H // 2, W // 2), a buffer of the caller's."""
+    for channel in range(pooled.shape[0]):
+        for row in range(pooled.shape[1]):
+            top, bottom, kept = planes[channel, 2 * row], planes[channel, 2 * row + 1], pooled[channel, row]
+            for column in range(pooled.shape[2]):
+                largest = np.float32(-np.inf)
+                for value in (top[2 * column], top[2 * column + 1], bottom[2 * column], bottom[2 * column + 1]):
+                    if value > largest or np.isnan(value):
+                        largest = value
+                kept[column] = largest
 
 
 _FAST = dict(cache=True, nogil=True, error_model="numpy")  # numpy's: a division without Python's zero check
@@ -108,16 +113,8 @@ def _convolve(planes, source, weights, size, kernel_size, stride) -> None:
 
 @njit(**_FAST)
 def _tanh_of_pooled(planes: np.ndarray, pooled: np.ndarray) -> None:
-    """pooled (C, H/2, W/2) = tanh of each 2 x 2 window's maximum, the window scanned by max_pool2's rule."""
-    for channel in range(pooled.shape[0]):
-        for row in range(pooled.shape[1]):
-            top, bottom, kept = planes[channel, 2 * row], planes[channel, 2 * row + 1], pooled[channel, row]
-            for column in range(pooled.shape[2]):
-                largest = np.float32(-np.inf)
-                for value in (top[2 * column], top[2 * column + 1], bottom[2 * column], bottom[2 * column + 1]):
-                    if value > largest or np.isnan(value):
-                        largest = value
-                kept[column] = largest
+    """pooled (C, H/2, W/2) = tanh of each 2 x 2 window's maximum (``max_pool2``'s rule)."""
+    _pool_into(planes, pooled)
     flat = pooled.reshape(-1)
     for index in range(flat.size):  # a loop of its own, which vectorises
         flat[index] = rational_tanh(flat[index])
