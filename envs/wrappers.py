@@ -14,6 +14,8 @@ from gymnasium import spaces
 from gymnasium.wrappers import TimeLimit
 from numba import njit
 
+from envs.area_resize import AreaResize, takes_area_path
+
 
 def _network_output_space(size: int) -> spaces.Box:
     return spaces.Box(-np.inf, np.inf, (size,), dtype=np.float32)
@@ -94,7 +96,9 @@ class PixelObservation(gym.ObservationWrapper):
     """RGB frame -> 84x84 (cv2 INTER_AREA) -> float32 in [0, 1] -> swapaxes(0, 2).
 
     The original's ``np.swapaxes(obs, 0, 2)`` gives (C, W, H): the image is transposed. It is kept
-    so that CNN weights evolved by the original code see what they were evolved on.
+    so that CNN weights evolved by the original code see what they were evolved on. A uint8 frame
+    that OpenCV resizes through its area tables (CarRacing's 96 x 96) goes through ``AreaResize``,
+    the same values with the tables made once; any other through ``cv2.resize``.
     """
 
     SIZE = 84
@@ -109,12 +113,20 @@ class PixelObservation(gym.ObservationWrapper):
         self._cv2 = cv2
         self.observation_space = spaces.Box(0.0, 1.0, (3, self.SIZE, self.SIZE), dtype=np.float32)
         self._frame = np.empty((self.SIZE, self.SIZE, 3), dtype=np.uint8)  # cv2 resizes into it
+        self._area: AreaResize | None = None  # for frames of shape self._area_shape, where it applies
+        self._area_shape: tuple[int, ...] | None = None
 
     def observation(self, observation: np.ndarray) -> np.ndarray:
         """The same float32s as ``swapaxes(frame.astype(float32) / 255.0, 0, 2)``, made contiguous,
         with one conversion and no intermediate array (the result is new: callers may keep it)."""
         frame = self._frame
         if observation.dtype == np.uint8 and observation.ndim == 3 and observation.shape[2] == 3:
+            if observation.shape != self._area_shape:
+                self._area_shape = observation.shape
+                self._area = (AreaResize(observation.shape, (self.SIZE, self.SIZE))
+                              if takes_area_path(observation.shape[:2], (self.SIZE, self.SIZE)) else None)
+            if self._area is not None:
+                return self._area(observation)
             frame = self._cv2.resize(observation, (self.SIZE, self.SIZE), dst=frame, interpolation=self._cv2.INTER_AREA)
         else:  # another dtype resizes to its own
             frame = self._cv2.resize(observation, (self.SIZE, self.SIZE), interpolation=self._cv2.INTER_AREA)

@@ -1,0 +1,138 @@
+"""OpenCV's ``cv2.resize(frame, size, interpolation=cv2.INTER_AREA)`` of a uint8 RGB frame, value for value,
+compiled and fused with the pixel policy's conversion to float32 planes (issue 21).
+
+A downscale by a factor that is not a whole number on both axes (CarRacing's 96 x 96 to 84 x 84) takes
+OpenCV's general area path (``modules/imgproc/src/resize.cpp``): ``computeResizeAreaTab`` lists, per
+output column, the source columns it covers and their float32 weights (computed in double, the first
+and last partial); ``ResizeArea_Invoker`` sums each source row over those columns in float32, then the
+rows of each output row, and rounds half to even into uint8. This module builds the same tables once per
+shape and sums in the same order, with each column's and row's terms padded to a fixed count by terms
+of weight 0: a pixel times 0 is +0, and a non-negative float32 plus +0 is itself, so the sums keep
+their bits. Each source row is summed across once, where OpenCV sums it again for every output row it
+touches; the sums are the same.
+
+``PixelObservation`` uses it where it applies (``takes_area_path``) and ``cv2.resize`` otherwise.
+No ``fastmath``: the sums must round as OpenCV's do. ``tests/test_area_resize.py`` compares it with
+``cv2.resize`` on CarRacing's frames and random images of many shapes.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+from numba import njit
+
+
+def _scale(source: int, size: int) -> float:
+    return 1.0 / (size / source)  # OpenCV's scale_x = 1./inv_scale_x, inv_scale_x = (double)dsize/ssize
+
+
+def takes_area_path(source: tuple[int, int], size: tuple[int, int]) -> bool:
+    """Whether OpenCV's INTER_AREA resizes ``source`` (height, width) to ``size`` (height, width)
+    through the area tables: a downscale on both axes (an upscale is a bilinear variant) whose factors
+    are not both whole numbers (``resizeAreaFast``), as ``cv::resize`` decides it."""
+    scales = [_scale(source[axis], size[axis]) for axis in (0, 1)]
+    if min(scales) < 1.0:
+        return False
+    return not all(abs(scale - round(scale)) < np.finfo(np.float64).eps for scale in scales)
+
+
+def _area_terms(source: int, size: int) -> list[tuple[int, int, np.float32]]:
+    """``computeResizeAreaTab`` for one channel: (output index, source index, weight) in OpenCV's order."""
+    scale = _scale(source, size)
+    terms = []
+    for out in range(size):
+        start = out * scale
+        end = start + scale
+        cell = min(scale, source - start)
+        first, last = math.ceil(start), math.floor(end)
+        last = min(last, source - 1)
+        first = min(first, last)
+        if first - start > 1e-3:
+            terms.append((out, first - 1, np.float32((first - start) / cell)))
+        terms.extend((out, index, np.float32(1.0 / cell)) for index in range(first, last))
+        if end - last > 1e-3:
+            terms.append((out, last, np.float32(min(min(end - last, 1.0), cell) / cell)))
+    return terms
+
+
+def _padded(terms: list[tuple[int, int, np.float32]], size: int, channels: int) -> tuple[np.ndarray, np.ndarray]:
+    """The terms as (count, size * channels) indices and weights into a row of ``channels``-interleaved
+    values, each output's in OpenCV's order, padded with terms of weight 0."""
+    per_output: list[list[tuple[int, np.float32]]] = [[] for _ in range(size)]
+    for out, index, weight in terms:
+        per_output[out].append((index, weight))
+    count = max(len(entries) for entries in per_output)
+    indices = np.empty((count, size), dtype=np.int64)
+    weights = np.zeros((count, size), dtype=np.float32)
+    for out, entries in enumerate(per_output):
+        for term, (index, weight) in enumerate(entries):
+            indices[term, out], weights[term, out] = index, weight
+        indices[len(entries):, out] = entries[-1][0]  # any pixel of the row: its weight is 0
+    channel = np.arange(channels)
+    return ((indices[:, :, None] * channels + channel).reshape(count, size * channels),
+            np.repeat(weights, channels, axis=1))
+
+
+@functools.lru_cache(maxsize=8)
+def area_tables(source: tuple[int, int], size: tuple[int, int], channels: int) -> tuple[np.ndarray, ...]:
+    """(column indices, column weights, row indices, row weights) of a resize of a ``channels``-channel
+    frame from ``source`` to ``size`` (both (height, width)), for ``area_planes``."""
+    (height, width), (out_height, out_width) = source, size
+    row_indices, row_weights = _padded(_area_terms(height, out_height), out_height, 1)
+    tables = (*_padded(_area_terms(width, out_width), out_width, channels), row_indices, row_weights)
+    for table in tables:
+        table.flags.writeable = False
+    return tables
+
+
+class AreaResize:
+    """``cv2.resize(frame, size, interpolation=cv2.INTER_AREA)`` of uint8 frames of one shape, as the
+    float32 planes (C, width, height) of ``swapaxes(resized / 255.0, 0, 2)``; the scratch is its own."""
+
+    def __init__(self, shape: tuple[int, int, int], size: tuple[int, int]):
+        height, width, channels = shape
+        self.shape, self.size = shape, size
+        self._tables = area_tables((height, width), size, channels)
+        self._line = np.empty(width * channels, dtype=np.float32)
+        self._across = np.empty((height, size[1] * channels), dtype=np.float32)
+        self._rows = np.empty((size[0], size[1] * channels), dtype=np.float32)
+
+    def __call__(self, frame: np.ndarray) -> np.ndarray:
+        height, width, channels = self.shape
+        out = np.empty((channels, self.size[1], self.size[0]), dtype=np.float32)
+        flat = np.ascontiguousarray(frame).reshape(height, width * channels)
+        area_planes(flat, *self._tables, self._line, self._across, self._rows, out)
+        return out
+
+
+@njit(cache=True, nogil=True)
+def area_planes(frame, columns, column_weights, rows, row_weights, line, across, resized, out) -> None:
+    """out[c, x, y] = float32(``cv2.resize(frame, INTER_AREA)[y, x, c]``) / 255 for a frame of (H, W * C)
+    uint8 and out (C, w, h); scratch: line (W * C,), across (H, w * C), each source row summed across,
+    and resized (h, w * C)."""
+    for source_row in range(frame.shape[0]):
+        pixels, sums = frame[source_row], across[source_row]
+        for index in range(pixels.size):
+            line[index] = np.float32(pixels[index])
+        sums[:] = np.float32(0.0)
+        for term in range(columns.shape[0]):  # OpenCV's order: buf[dx] += S[sx] * alpha, term by term
+            indices, weights = columns[term], column_weights[term]
+            for index in range(sums.size):
+                sums[index] += line[indices[index]] * weights[index]
+    for y in range(rows.shape[1]):
+        sums = resized[y]
+        sums[:] = np.float32(0.0)
+        for term in range(rows.shape[0]):  # sum += beta * buf, row by row
+            weight, summed = row_weights[term, y], across[rows[term, y]]
+            for index in range(sums.size):
+                sums[index] += weight * summed[index]
+        for index in range(sums.size):  # saturate_cast<uchar>: cvRound, clamped; then numpy's uint8 / 255.0
+            sums[index] = min(max(np.rint(sums[index]), np.float32(0.0)), np.float32(255.0)) / np.float32(255.0)
+    channels = out.shape[0]
+    for channel in range(channels):
+        for x in range(out.shape[1]):
+            for y in range(out.shape[2]):
+                out[channel, x, y] = resized[y, x * channels + channel]
