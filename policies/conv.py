@@ -132,8 +132,8 @@ def fast_features(obs, conv1, conv2, planes1, pooled1, planes2, features) -> np.
 
 
 class ConvFeatures:
-    """The 648 features of one observation (``__call__``); ``fast``: the compiled pass, whose features are
-    the same array, overwritten, at every call."""
+    """The 648 features of one observation (``__call__``): the same array, overwritten, at every call.
+    ``fast``: the compiled pass; otherwise torch's convolutions and tanh, pooled into buffers of its own."""
 
     def __init__(self, conv_weights: np.ndarray, shapes: tuple[tuple[int, ...], ...], fast: bool = False):
         first, second = shapes
@@ -141,12 +141,12 @@ class ConvFeatures:
         weights = np.ascontiguousarray(conv_weights, dtype=np.float32)
         conv1, conv2 = weights[:split].reshape(first).copy(), weights[split:].reshape(second).copy()
         self._forward = self._fast if fast else self._torch_forward
+        pooled1 = np.empty((first[0], SIZE1 // 2, SIZE1 // 2), np.float32)
+        features = np.empty(second[0] * (SIZE2 // 2) ** 2, np.float32)
         if fast:
             self._weights = conv1, conv2
-            self._buffers = (np.empty((first[0], SIZE1, SIZE1), np.float32),
-                             np.empty((first[0], SIZE1 // 2, SIZE1 // 2), np.float32),
-                             np.empty((second[0], SIZE2, SIZE2), np.float32),
-                             np.empty(second[0] * (SIZE2 // 2) ** 2, np.float32))
+            self._buffers = (np.empty((first[0], SIZE1, SIZE1), np.float32), pooled1,
+                             np.empty((second[0], SIZE2, SIZE2), np.float32), features)
             return
         import torch
 
@@ -154,6 +154,8 @@ class ConvFeatures:
         self._torch = torch
         self._conv1 = torch.from_numpy(conv1)
         self._conv2 = torch.from_numpy(conv2)
+        self._pooled1, self._features = pooled1, features
+        self._pooled2 = features.reshape(second[0], SIZE2 // 2, SIZE2 // 2)  # conv2's 19 x 19 pools to 9 x 9
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         return self._forward(obs)
@@ -166,5 +168,7 @@ class ConvFeatures:
         conv2d = torch.nn.functional.conv2d
         with torch.inference_mode():
             x = torch.from_numpy(np.ascontiguousarray(obs, dtype=np.float32))[None]
-            x = torch.from_numpy(max_pool2(conv2d(x, self._conv1).tanh_()[0].numpy()))[None]
-            return max_pool2(conv2d(x, self._conv2, stride=2).tanh_()[0].numpy()).reshape(-1)
+            _pool_into(conv2d(x, self._conv1).tanh_()[0].numpy(), self._pooled1)
+            _pool_into(conv2d(torch.from_numpy(self._pooled1)[None], self._conv2, stride=2).tanh_()[0].numpy(),
+                       self._pooled2)
+            return self._features

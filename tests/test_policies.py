@@ -208,6 +208,29 @@ def test_max_pool2_is_torchs_max_pool2d_bit_for_bit(shape):
         expected = nn.functional.max_pool2d(torch.from_numpy(planes)[None], 2)[0].numpy()
     assert np.array_equal(max_pool2(planes).view(np.uint32), expected.view(np.uint32))
 
+
+@pytest.mark.parametrize("channels", [3, 4])
+def test_default_cnn_features_are_torchs_layers_bit_for_bit(channels):
+    """The default front end (policies/conv.py, torch's path pooled into its own buffers) gives the
+    bits of torch's own layers, and overwrites one array at every call."""
+    from policies.conv import ConvFeatures
+    from policies.network import conv_shapes
+
+    shapes = conv_shapes(channels)
+    rng = np.random.default_rng(channels)
+    weights = rng.normal(0.0, 0.5, sum(int(np.prod(shape)) for shape in shapes)).astype(np.float32)
+    conv1, conv2 = (torch.from_numpy(part.reshape(shape)) for part, shape in
+                    zip(np.split(weights, [int(np.prod(shapes[0]))]), shapes))
+    features = ConvFeatures(weights, shapes)
+    first = None
+    for obs in rng.uniform(0, 1, size=(3, channels, 84, 84)).astype(np.float32):
+        with torch.inference_mode():
+            x = nn.functional.max_pool2d(torch.tanh(nn.functional.conv2d(torch.from_numpy(obs)[None], conv1)), 2)
+            expected = nn.functional.max_pool2d(torch.tanh(nn.functional.conv2d(x, conv2, stride=2)), 2).reshape(-1)
+        got = features(obs)
+        first = got if first is None else first
+        assert got is first and np.array_equal(got.view(np.uint32), expected.numpy().view(np.uint32))
+
 # --- (d) --init_weights distributions (spec §4.4) --------------------------------------------------
 
 # (kind, parameter) of each distribution for a layer with the given fan-in and fan-out.
