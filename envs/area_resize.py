@@ -33,6 +33,8 @@ def takes_area_path(source: tuple[int, int], size: tuple[int, int]) -> bool:
     """Whether OpenCV's INTER_AREA resizes ``source`` (height, width) to ``size`` (height, width)
     through the area tables: a downscale on both axes (an upscale is a bilinear variant) whose factors
     are not both whole numbers (``resizeAreaFast``), as ``cv::resize`` decides it."""
+    if min(*source, *size) < 1:
+        return False  # nothing to resize: OpenCV's own error
     scales = [_scale(source[axis], size[axis]) for axis in (0, 1)]
     if min(scales) < 1.0:
         return False

@@ -46,23 +46,18 @@ def worker_modules(net: NetworkSpec, fast: bool) -> tuple[str, ...]:
 
 
 @njit(cache=True, nogil=True)  # no fastmath: NaN and the sign of zero must survive as they are
-def max_pool2(planes: np.ndarray) -> np.ndarray:
-    """``torch.nn.functional.max_pool2d(x, 2)`` of (C, H, W) float32 planes, bit for bit.
+def max_pool2(planes: np.ndarray, pooled=None) -> np.ndarray:
+    """``torch.nn.functional.max_pool2d(x, 2)`` of (C, H, W) float32 planes, bit for bit, into ``pooled``
+    (C, H // 2, W // 2), a buffer of the caller's, or a new array.
 
     PyTorch's CPU kernel (``aten/src/ATen/native/cpu/MaxPoolKernel.cpp``) scans each 2 x 2 window
     in row-major order from -inf and keeps a value if ``value > kept || isnan(value)``: the first of
     equal maxima (which decides the sign of a zero) and the last NaN win. The last row and column
     of an odd size are dropped (floor mode).
     """
-    channels, height, width = planes.shape
-    pooled = np.empty((channels, height // 2, width // 2), dtype=np.float32)
-    _pool_into(planes, pooled)
-    return pooled
-
-
-@njit(cache=True, nogil=True)
-def _pool_into(planes: np.ndarray, pooled: np.ndarray) -> None:
-    """``max_pool2`` of ``planes`` into ``pooled`` (C, H // 2, W // 2), a buffer of the caller's."""
+    if pooled is None:
+        channels, height, width = planes.shape
+        pooled = np.empty((channels, height // 2, width // 2), dtype=np.float32)
     for channel in range(pooled.shape[0]):
         for row in range(pooled.shape[1]):
             top, bottom, kept = planes[channel, 2 * row], planes[channel, 2 * row + 1], pooled[channel, row]
@@ -72,6 +67,7 @@ def _pool_into(planes: np.ndarray, pooled: np.ndarray) -> None:
                     if value > largest or np.isnan(value):
                         largest = value
                 kept[column] = largest
+    return pooled
 
 
 _FAST = dict(cache=True, nogil=True, error_model="numpy")  # numpy's: a division without Python's zero check
@@ -114,7 +110,7 @@ def _convolve(planes, source, weights, size, kernel_size, stride) -> None:
 @njit(**_FAST)
 def _tanh_of_pooled(planes: np.ndarray, pooled: np.ndarray) -> None:
     """pooled (C, H/2, W/2) = tanh of each 2 x 2 window's maximum (``max_pool2``'s rule)."""
-    _pool_into(planes, pooled)
+    max_pool2(planes, pooled)
     flat = pooled.reshape(-1)
     for index in range(flat.size):  # a loop of its own, which vectorises
         flat[index] = rational_tanh(flat[index])
@@ -133,7 +129,8 @@ def fast_features(obs, conv1, conv2, planes1, pooled1, planes2, features) -> np.
 
 class ConvFeatures:
     """The 648 features of one observation (``__call__``): the same array, overwritten, at every call.
-    ``fast``: the compiled pass; otherwise torch's convolutions and tanh, pooled into buffers of its own."""
+    ``fast``: the compiled pass; otherwise torch's convolutions and tanh, pooled (``max_pool2``) into
+    buffers of its own."""
 
     def __init__(self, conv_weights: np.ndarray, shapes: tuple[tuple[int, ...], ...], fast: bool = False):
         first, second = shapes
@@ -168,7 +165,7 @@ class ConvFeatures:
         conv2d = torch.nn.functional.conv2d
         with torch.inference_mode():
             x = torch.from_numpy(np.ascontiguousarray(obs, dtype=np.float32))[None]
-            _pool_into(conv2d(x, self._conv1).tanh_()[0].numpy(), self._pooled1)
-            _pool_into(conv2d(torch.from_numpy(self._pooled1)[None], self._conv2, stride=2).tanh_()[0].numpy(),
-                       self._pooled2)
+            max_pool2(conv2d(x, self._conv1).tanh_()[0].numpy(), self._pooled1)
+            max_pool2(conv2d(torch.from_numpy(self._pooled1)[None], self._conv2, stride=2).tanh_()[0].numpy(),
+                      self._pooled2)
             return self._features

@@ -68,6 +68,7 @@ def test_the_area_path_is_where_opencv_takes_it():
     assert not takes_area_path((64, 64), (84, 84))
     assert not takes_area_path((96, 64), (84, 84))
     assert takes_area_path((168, 96), (84, 84))  # whole on one axis only: the tables
+    assert not takes_area_path((0, 96), (84, 84))  # an empty frame: OpenCV's own error, as before
 
 
 @pytest.mark.parametrize("shape", [(96, 96, 3), (84, 84, 3), (168, 168, 3), (64, 64, 3), (96, 64, 3), (210, 160, 3)])
