@@ -14,7 +14,9 @@ checkpoints are made by the caller, exactly as the stock method makes them) and 
 - the tile bodies are made by the calls pybox2d's wrappers end in (``b2World.__CreateBody`` with
   one reused body definition, ``b2Body.__CreateFixture`` with the stock fixture definition whose
   shape gets its four corners through ``set_vertex``), in the stock order, with the stock
-  attributes, so the world, its contacts and the reward are the stock's.
+  attributes, so the world, its contacts and the reward are the stock's; the colours, rows of one
+  array, are computed before the loop in one pass (``_tile_colors``: setting them row by row inside
+  it had cost a sixth of this function's time).
 """
 
 from __future__ import annotations
@@ -203,6 +205,22 @@ def checkpoints(env: stock.CarRacing) -> np.ndarray:
     return rows
 
 
+_WHITE, _RED = (255, 255, 255), (255, 0, 0)  # the stock border's colours, alternating from tile 0
+
+
+def _tile_colors(road_color: np.ndarray, tiles: np.ndarray) -> np.ndarray:
+    """``road_poly``'s colours as rows (K, 3), in its order: each tile's road, the stock's
+    ``road_color + 0.01 * (i % 3) * 255``, then its border if it has one."""
+    bordered = ~np.isnan(tiles[:, 8])
+    tile = np.arange(len(tiles))
+    road_row = tile + np.cumsum(bordered) - bordered  # a tile's road comes after the polygons before it
+    colors = np.empty((len(tiles) + int(np.count_nonzero(bordered)), 3))
+    shades = np.array([road_color + 0.01 * shade * 255 for shade in range(3)])
+    colors[road_row] = shades[tile % 3]
+    colors[road_row[bordered] + 1] = np.where((tile[bordered] % 2 == 0)[:, None], _WHITE, _RED)
+    return colors
+
+
 def create_track(env: stock.CarRacing, body_def: b2BodyDef) -> tuple[np.ndarray, np.ndarray] | None:
     """The stock ``_create_track`` on ``env``: the same track, ``road_poly``, bodies and draws.
 
@@ -223,35 +241,32 @@ def create_track(env: stock.CarRacing, body_def: b2BodyDef) -> tuple[np.ndarray,
     # what world.CreateStaticBody, body.CreateFixture and shape.vertices = ... end in
     create_body, create_fixture = env.world._b2World__CreateBody, b2Body._b2Body__CreateFixture
     set_vertex, set_shape = shape.set_vertex, shape._b2PolygonShape__set_vertices_internal
-    road_color, road, road_poly = env.road_color, env.road, env.road_poly
-    white, red = (255, 255, 255), (255, 0, 0)
-    shades = [road_color + 0.01 * shade * 255 for shade in range(3)]  # the stock's per tile, i % 3 = shade
-    colors = np.empty((len(tiles) + int(np.count_nonzero(~np.isnan(tiles[:, 8]))), 3))
+    road, road_poly = env.road, env.road_poly
+    colors = _tile_colors(env.road_color, tiles)
+    rows = list(colors)  # views, one per polygon: what the tiles hold and the contact listener recolours
     k = 0
     for i, row in enumerate(tiles.tolist()):
         l1, r1, r2, l2 = (row[0], row[1]), (row[2], row[3]), (row[4], row[5]), (row[6], row[7])
-        set_vertex(0, *l1)
-        set_vertex(1, *r1)
-        set_vertex(2, *r2)
-        set_vertex(3, *l2)
+        set_vertex(0, row[0], row[1])
+        set_vertex(1, row[2], row[3])
+        set_vertex(2, row[4], row[5])
+        set_vertex(3, row[6], row[7])
         shape.vertexCount = 4
         set_shape()
         body = create_body(body_def)
         fixture = create_fixture(body, fixture_def)
         body.userData = body
-        colors[k] = shades[i % 3]
-        body.color = color = colors[k]
-        k += 1
+        body.color = color = rows[k]
         body.road_visited = False
         body.road_friction = 1.0
         body.idx = i
         fixture.sensor = True
         road_poly.append(([l1, r1, r2, l2], color))
         road.append(body)
+        k += 1
         if row[8] == row[8]:  # a border (NaN otherwise)
             border = [(row[8], row[9]), (row[10], row[11]), (row[12], row[13]), (row[14], row[15])]
-            road_poly.append((border, white if i % 2 == 0 else red))
-            colors[k] = road_poly[-1][1]
+            road_poly.append((border, _WHITE if i % 2 == 0 else _RED))
             k += 1
     env.track = [tuple(row) for row in track.tolist()]
     corners = tiles.reshape(-1, 8)  # each tile's road, then its border (NaN where none)
