@@ -12,7 +12,9 @@ reset, episode by episode for the training loops) so that this machine's drift a
 on both alike; the medians over rounds are printed.
 
 - environment: ``env.step`` of each class, the same seeds and random actions (resets untimed), and
-  ``env.reset`` (track generation, tile bodies, the first frame) on the same seeds;
+  ``env.reset`` (track generation, tile bodies, the first frame) on the same seeds; then ``env.step``
+  by step of the episode (``PHASES``): the camera zooms in over the first 50 steps, with the whole
+  track in view at first, and generation-0 episodes end within it;
 - training loop, generation 0: the real evaluation path (serial evaluator, worker, recipe wrappers,
   network, rollout) on the same generation of tasks, static and Hebbian (ABCD_lr), so early-stopped
   episodes, resets included; both classes must return the same fitness;
@@ -64,6 +66,7 @@ from policies import PolicySettings
 FAST_ID = "CarRacing-v3"
 ENV_TARGET, RESET_TARGET, LOOP_TARGET = 8.0, 2.5, 5.0
 PAPER_POPSIZE, PAPER_GENERATIONS, FULL_EPISODE = 200, 300, 1000
+PHASES = ((0, 10), (10, 20), (20, 30), (30, 50), (50, 120))  # steps of an episode: the zoom-in is steps 0-49
 
 
 def make(env_id: str, render_mode: str | None = None) -> gym.Env:
@@ -111,6 +114,25 @@ def env_rates(rounds: int, steps: int, chunk: int = 25) -> tuple[list[float], li
     stock.close()
     fast.close()
     return stock_rates, fast_rates
+
+
+def phase_costs(episodes: int, chunk: int = 10) -> list[tuple[float, float]]:
+    """CPU seconds per ``env.step`` of each class (stock, fast) over each of ``PHASES``, counted from
+    the reset, over ``episodes`` episodes on the same seeds and random actions, the two classes
+    alternating every ``chunk`` steps."""
+    stock, fast = make(STOCK_ID), make(FAST_ID)
+    sum(timed_steps(fast, 0, random_actions(np.random.default_rng(0), 5), 5))  # warm-up: numba's compiled code
+    length = PHASES[-1][1]
+    seconds = np.zeros((2, length // chunk))
+    for episode in range(episodes):
+        actions = random_actions(np.random.default_rng(700 + episode), length)
+        chunks = zip(*(timed_steps(env, 700 + episode, actions, chunk) for env in (stock, fast)))
+        for index, pair in enumerate(chunks):
+            seconds[:, index] += pair
+    stock.close()
+    fast.close()
+    return [tuple(seconds[:, first // chunk:end // chunk].sum(axis=1) / (episodes * (end - first)))
+            for first, end in PHASES]
 
 
 def reset_rates(rounds: int, resets: int) -> tuple[list[float], list[float]]:
@@ -404,6 +426,8 @@ def main() -> int:
     parser.add_argument("--rounds", type=positive_int, default=5)
     parser.add_argument("--steps", type=positive_int, default=300, help="environment steps per class and round")
     parser.add_argument("--resets", type=positive_int, default=20, help="resets per class and round")
+    parser.add_argument("--phase_episodes", type=positive_int, default=6,
+                        help="episodes of env.step timed by step of the episode (the zoom-in first)")
     parser.add_argument("--popsize", type=positive_int, default=8, help="episodes per generation-0 training-loop round")
     parser.add_argument("--episodes", type=positive_int, default=2, help="capped episodes per training-loop round")
     parser.add_argument("--length", type=positive_int, default=300, help="steps of a capped episode")
@@ -419,6 +443,10 @@ def main() -> int:
     args = parser.parse_args()
     summary("environment (env.step)", *env_rates(args.rounds, args.steps), ENV_TARGET)
     summary("environment (env.reset)", *reset_rates(args.rounds, args.resets), RESET_TARGET, unit="resets")
+    phases = [f"{first}-{end - 1}: {stock * 1e3:.2f} / {fast * 1e3:.2f} ms, {stock / fast:.1f}x"
+              for (first, end), (stock, fast) in zip(PHASES, phase_costs(args.phase_episodes))]
+    print(f"environment (env.step) by step of the episode, stock / fast CPU per step (the camera zooms in "
+          f"over steps 0-49): {'; '.join(phases)}")
     for kind in ("static", "hebbian"):
         stock, fast, length = loop_rates(kind, args.rounds, args.popsize)
         summary(f"training loop, generation 0, {kind} (mean episode {length:.0f} steps)", stock, fast)
