@@ -40,6 +40,7 @@ training loop per step >= 5x (goal 8x).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import statistics
 import sys
@@ -51,6 +52,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import gymnasium as gym
+from gymnasium.envs.box2d.car_racing import FPS
 from throughput import generation_tasks
 
 import envs
@@ -66,12 +68,25 @@ from policies import PolicySettings
 FAST_ID = "CarRacing-v3"
 ENV_TARGET, RESET_TARGET, LOOP_TARGET = 8.0, 2.5, 5.0
 PAPER_POPSIZE, PAPER_GENERATIONS, FULL_EPISODE = 200, 300, 1000
-PHASES = ((0, 10), (10, 20), (20, 30), (30, 50), (50, 120))  # steps of an episode: the zoom-in is steps 0-49
+ZOOM_IN = FPS  # the camera zooms in over an episode's first second
+PHASES = ((0, 10), (10, 20), (20, 30), (30, ZOOM_IN), (ZOOM_IN, 120))  # steps of an episode, from its reset
 
 
 def make(env_id: str, render_mode: str | None = None) -> gym.Env:
     with envs.quiet_output():
         return gym.make(env_id, render_mode=render_mode)
+
+
+@contextlib.contextmanager
+def both_classes():
+    """Gymnasium's class and the fast one, the fast one's compiled code warmed up; closed afterwards."""
+    stock, fast = make(STOCK_ID), make(FAST_ID)
+    try:
+        sum(timed_steps(fast, 0, random_actions(np.random.default_rng(0), 5), 5))  # numba's compiled code
+        yield stock, fast
+    finally:
+        stock.close()
+        fast.close()
 
 
 def random_actions(rng: np.random.Generator, steps: int) -> np.ndarray:
@@ -101,18 +116,15 @@ def env_rates(rounds: int, steps: int, chunk: int = 25) -> tuple[list[float], li
     """Steps per CPU second of each class, per round, the same seeds and actions for both, the two
     classes alternating every ``chunk`` steps (a round of the stock class lasts seconds: the load
     of this machine changes within one)."""
-    stock, fast = make(STOCK_ID), make(FAST_ID)
-    sum(timed_steps(fast, 0, random_actions(np.random.default_rng(0), 5), 5))  # warm-up: numba's compiled code
     stock_rates, fast_rates = [], []
-    for round_index in range(rounds):
-        actions = random_actions(np.random.default_rng(500 + round_index), steps)
-        chunks = zip(timed_steps(stock, 500 + round_index, actions, chunk),
-                     timed_steps(fast, 500 + round_index, actions, chunk))
-        stock_seconds, fast_seconds = (sum(seconds) for seconds in zip(*chunks))
-        stock_rates.append(len(actions) / stock_seconds)
-        fast_rates.append(len(actions) / fast_seconds)
-    stock.close()
-    fast.close()
+    with both_classes() as (stock, fast):
+        for round_index in range(rounds):
+            actions = random_actions(np.random.default_rng(500 + round_index), steps)
+            chunks = zip(timed_steps(stock, 500 + round_index, actions, chunk),
+                         timed_steps(fast, 500 + round_index, actions, chunk))
+            stock_seconds, fast_seconds = (sum(seconds) for seconds in zip(*chunks))
+            stock_rates.append(len(actions) / stock_seconds)
+            fast_rates.append(len(actions) / fast_seconds)
     return stock_rates, fast_rates
 
 
@@ -120,17 +132,15 @@ def phase_costs(episodes: int, chunk: int = 10) -> list[tuple[float, float]]:
     """CPU seconds per ``env.step`` of each class (stock, fast) over each of ``PHASES``, counted from
     the reset, over ``episodes`` episodes on the same seeds and random actions, the two classes
     alternating every ``chunk`` steps."""
-    stock, fast = make(STOCK_ID), make(FAST_ID)
-    sum(timed_steps(fast, 0, random_actions(np.random.default_rng(0), 5), 5))  # warm-up: numba's compiled code
     length = PHASES[-1][1]
     seconds = np.zeros((2, length // chunk))
-    for episode in range(episodes):
-        actions = random_actions(np.random.default_rng(700 + episode), length)
-        chunks = zip(*(timed_steps(env, 700 + episode, actions, chunk) for env in (stock, fast)))
-        for index, pair in enumerate(chunks):
-            seconds[:, index] += pair
-    stock.close()
-    fast.close()
+    with both_classes() as (stock, fast):
+        for episode in range(episodes):
+            actions = random_actions(np.random.default_rng(700 + episode), length)
+            chunks = zip(timed_steps(stock, 700 + episode, actions, chunk),
+                         timed_steps(fast, 700 + episode, actions, chunk))
+            for index, pair in enumerate(chunks):
+                seconds[:, index] += pair
     return [tuple(seconds[:, first // chunk:end // chunk].sum(axis=1) / (episodes * (end - first)))
             for first, end in PHASES]
 
@@ -138,20 +148,17 @@ def phase_costs(episodes: int, chunk: int = 10) -> list[tuple[float, float]]:
 def reset_rates(rounds: int, resets: int) -> tuple[list[float], list[float]]:
     """Resets per CPU second of each class, per round, on the same seeds, the two classes
     alternating reset by reset."""
-    stock, fast = make(STOCK_ID), make(FAST_ID)
-    fast.reset(seed=0)  # warm-up
     rates: list[list[float]] = [[], []]
-    for round_index in range(rounds):
-        seconds = [0.0, 0.0]
-        for seed in range(900 + round_index * resets, 900 + (round_index + 1) * resets):
-            for index, env in enumerate((stock, fast)):
-                started = time.process_time()
-                env.reset(seed=seed)
-                seconds[index] += time.process_time() - started
-        for found, spent in zip(rates, seconds):
-            found.append(resets / spent)
-    stock.close()
-    fast.close()
+    with both_classes() as (stock, fast):
+        for round_index in range(rounds):
+            seconds = [0.0, 0.0]
+            for seed in range(900 + round_index * resets, 900 + (round_index + 1) * resets):
+                for index, env in enumerate((stock, fast)):
+                    started = time.process_time()
+                    env.reset(seed=seed)
+                    seconds[index] += time.process_time() - started
+            for found, spent in zip(rates, seconds):
+                found.append(resets / spent)
     return rates[0], rates[1]
 
 
@@ -446,7 +453,7 @@ def main() -> int:
     phases = [f"{first}-{end - 1}: {stock * 1e3:.2f} / {fast * 1e3:.2f} ms, {stock / fast:.1f}x"
               for (first, end), (stock, fast) in zip(PHASES, phase_costs(args.phase_episodes))]
     print(f"environment (env.step) by step of the episode, stock / fast CPU per step (the camera zooms in "
-          f"over steps 0-49): {'; '.join(phases)}")
+          f"over steps 0-{ZOOM_IN - 1}): {'; '.join(phases)}")
     for kind in ("static", "hebbian"):
         stock, fast, length = loop_rates(kind, args.rounds, args.popsize)
         summary(f"training loop, generation 0, {kind} (mean episode {length:.0f} steps)", stock, fast)

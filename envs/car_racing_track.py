@@ -205,7 +205,7 @@ def checkpoints(env: stock.CarRacing) -> np.ndarray:
     return rows
 
 
-_WHITE, _RED = (255, 255, 255), (255, 0, 0)  # the stock border's colours, alternating from tile 0
+_BORDER = ((255, 255, 255), (255, 0, 0))  # the stock border's colours: tile i's is _BORDER[i % 2]
 
 
 def _tile_colors(road_color: np.ndarray, tiles: np.ndarray) -> np.ndarray:
@@ -217,7 +217,7 @@ def _tile_colors(road_color: np.ndarray, tiles: np.ndarray) -> np.ndarray:
     colors = np.empty((len(tiles) + int(np.count_nonzero(bordered)), 3))
     shades = np.array([road_color + 0.01 * shade * 255 for shade in range(3)])
     colors[road_row] = shades[tile % 3]
-    colors[road_row[bordered] + 1] = np.where((tile[bordered] % 2 == 0)[:, None], _WHITE, _RED)
+    colors[road_row[bordered] + 1] = np.array(_BORDER)[tile[bordered] % 2]
     return colors
 
 
@@ -266,7 +266,7 @@ def create_track(env: stock.CarRacing, body_def: b2BodyDef) -> tuple[np.ndarray,
         k += 1
         if row[8] == row[8]:  # a border (NaN otherwise)
             border = [(row[8], row[9]), (row[10], row[11]), (row[12], row[13]), (row[14], row[15])]
-            road_poly.append((border, _WHITE if i % 2 == 0 else _RED))
+            road_poly.append((border, _BORDER[i % 2]))
             k += 1
     env.track = [tuple(row) for row in track.tolist()]
     corners = tiles.reshape(-1, 8)  # each tile's road, then its border (NaN where none)
