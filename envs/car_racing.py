@@ -20,7 +20,8 @@ touch them) and computes the same picture with less work:
   ``smoothscale``'s 96 x 96 result from the spans; the car's corners come from Box2D's transform
   computed in float32 as Box2D does (``box2d_transform``). ``self.surf`` is then not updated;
 - per frame, the culling, the car's corners (``_car_screen``), the playfield test and the arrays
-  handed to the drawing are each one numba pass, with the same double and float32 operations;
+  handed to the drawing are one numba call (``_scene``), with the same double and float32
+  operations;
 - where ``smoothscale``'s backend is not SSE2 or NEON, the world is drawn by the same compiled
   functions straight into the flipped frame, the dashboard and score by pygame, and the picture
   shrunk by ``smoothscale`` itself;
@@ -111,14 +112,22 @@ def _screen_point(x: float, y: float, quarter: int, sine: float, cosine: float, 
 
 
 @njit(cache=True, nogil=True)
-def _cull(corners: np.ndarray, quarter: int, sine: float, cosine: float, zoom: float, tx: float,
+def _cull(corners: np.ndarray, reach: np.ndarray, quarter: int, sine: float, cosine: float, zoom: float, tx: float,
           ty: float) -> tuple[np.ndarray, np.ndarray]:
-    """``to_screen`` of polygons (K, 4, 2), then ``_visible_polygons``' two tests, in one pass."""
+    """``to_screen`` of polygons (K, 4, 2), then ``_visible_polygons``' two tests, in one pass.
+
+    A polygon whose circle (``reach``) lies on the screen wholly beyond the stock margin test's
+    bounds, by a pixel more than rounding could move a corner, has no corner within them: its
+    corners are not transformed (their rows of the screen corners are left unwritten)."""
     count = corners.shape[0]
     screen = np.empty(corners.shape)
     near = np.zeros(count, dtype=np.bool_)
     representable = True  # pygame_pixels: every drawn coordinate's int() reproducible
     for k in range(count):
+        cx, cy = _screen_point(reach[k, 0], reach[k, 1], quarter, sine, cosine, zoom, tx, ty)
+        slack = _CULL_MARGIN + reach[k, 2] * abs(zoom) * (1 + 1e-9) + 1.0
+        if cx < -slack or cx > _W + slack or cy < -slack or cy > _H + slack:  # (NaN: False, then tested)
+            continue
         for j in range(4):
             sx, sy = _screen_point(corners[k, j, 0], corners[k, j, 1], quarter, sine, cosine, zoom, tx, ty)
             screen[k, j, 0], screen[k, j, 1] = sx, sy
@@ -142,6 +151,13 @@ def _cull(corners: np.ndarray, quarter: int, sine: float, cosine: float, zoom: f
             low_y, high_y = min(low_y, py), max(high_y, py)
         kept[index] = high_x >= 0 and low_x <= _W - 1 and high_y >= 0 and low_y <= _H - 1
     return drawn[kept], screen
+
+
+def polygon_reach(corners: np.ndarray) -> np.ndarray:
+    """Per polygon (K, 4, 2): its corners' mean and the largest distance from it to a corner (K, 3)."""
+    center = corners.mean(axis=1)
+    radius = np.sqrt(((corners - center[:, None, :]) ** 2).sum(axis=2).max(axis=1))
+    return np.concatenate([center, radius[:, None]], axis=1)
 
 
 def rotate_like_pygame(points: np.ndarray, angle: float) -> np.ndarray:
@@ -250,6 +266,24 @@ def _scene_arrays(playfield, covered, world, world_colors, car_corners, car_coun
     return True, xs, ys, starts, colors, antialiased
 
 
+@njit(cache=True, nogil=True)
+def _scene(world, reach, grass_count, grass, road_rows, playfield_corners, quarter, sine, cosine, zoom, tx, ty, owners,
+           starts, vertices, poses, phased, phases, car_colors, white, background):
+    """``_compiled_scene`` in one call: the playfield (``_playfield``), the world culled
+    (``_cull``) with its pixel values (``_road_pixels``), the car (``_car_screen``), handed to
+    ``_scene_arrays``. Returns (drawable, playfield covers the screen, xs, ys, starts, pixel
+    values, anti-aliased); drawable is False where pygame must draw the frame."""
+    playfield, covered = _playfield(playfield_corners, quarter, sine, cosine, zoom, tx, ty)
+    drawn, screen = _cull(world, reach, quarter, sine, cosine, zoom, tx, ty)
+    world_colors = np.empty(drawn.shape[0], dtype=np.int64)
+    drawable = _road_pixels(drawn, grass_count, grass, road_rows, world_colors)
+    car_corners, car_counts, car_values = _car_screen(owners, starts, vertices, poses, phased, phases, car_colors,
+                                                      white, quarter, sine, cosine, zoom, tx, ty)
+    drawable = drawable and (car_counts.shape[0] == 0 or car_counts.min() >= 4)  # (pygame draws triangles otherwise)
+    fits, xs, ys, polygon_starts, colors, antialiased = _scene_arrays(playfield, covered, screen[drawn], world_colors,
+                                                                      car_corners, car_counts, car_values, background)
+    return drawable and fits, covered, xs, ys, polygon_starts, colors, antialiased
+
 def box2d_transform(cos_sin_position: np.ndarray, local: np.ndarray) -> np.ndarray:
     """``b2Transform * b2Vec2`` of pybox2d for rows of (cos, sin, x, y) and of local points, bit for bit.
 
@@ -324,9 +358,12 @@ def _car_screen(owners, starts, vertices, poses, phased, phases, colors, white, 
 @njit(cache=True, nogil=True)
 def _road_pixels(drawn, grass_count, grass, rows, values) -> bool:
     """``values``: the pixel of each polygon ``drawn`` of grass-then-road, ``grass`` or the tile's
-    colour row as the stock's ``int(c)`` packed in XRGB8888; False if a colour is not within 0..255."""
+    colour row as the stock's ``int(c)`` packed in XRGB8888; False if a colour is not within 0..255
+    (or a grass polygon is drawn and ``grass`` is -1)."""
     for index in range(drawn.shape[0]):
         if drawn[index] < grass_count:
+            if grass < 0:  # (the grass colour is not a plain pixel)
+                return False
             values[index] = grass
             continue
         pixel = 0
@@ -425,6 +462,7 @@ class FastCarRacing(stock.CarRacing):
         self._score_text: tuple[str, pygame.Surface, pygame.Rect] | None = None
         self._road_source: list | None = None
         self._world_corners = np.empty((0, 4, 2))
+        self._world_reach = np.empty((0, 3))  # polygon_reach of the world corners
         self._road_colors: list = []
         self._road_color_rows: np.ndarray | None = None  # the same colours as rows, when made so
         self._car_source: car_dynamics.Car | None = None
@@ -441,7 +479,7 @@ class FastCarRacing(stock.CarRacing):
             return False
         road, self._road_color_rows = made
         # _world_polygons' cache, from the same doubles road_poly holds
-        self._world_corners = np.concatenate([self._grass_corners, road])
+        self._set_world(np.concatenate([self._grass_corners, road]))
         self._road_colors = [color for _, color in self.road_poly]
         self._road_source = self.road_poly
         return True
@@ -533,11 +571,14 @@ class FastCarRacing(stock.CarRacing):
         road_poly = self.road_poly
         if self._road_source is not road_poly or len(self._world_corners) != len(self._grass_corners) + len(road_poly):
             road = np.array([poly for poly, _ in road_poly], dtype=np.float64).reshape(-1, 4, 2)
-            self._world_corners = np.concatenate([self._grass_corners, road])
+            self._set_world(np.concatenate([self._grass_corners, road]))
             self._road_colors = [color for _, color in road_poly]  # never copies: visited tiles change
             self._road_color_rows = None
             self._road_source = road_poly
         return self._world_corners
+
+    def _set_world(self, corners: np.ndarray) -> None:
+        self._world_corners, self._world_reach = corners, polygon_reach(corners)
 
     def _visible_polygons(self, zoom, translation, angle) -> tuple[np.ndarray, np.ndarray]:
         """Indices into grass-then-road of the polygons to draw, and their screen corners (n, 4, 2).
@@ -545,7 +586,7 @@ class FastCarRacing(stock.CarRacing):
         The stock test first (some corner within ``MAX_SHAPE_DIM`` of the screen), then the exact
         one: pygame would clip away every pixel of a polygon wholly beyond one side of the screen.
         """
-        drawn, screen = _cull(self._world_polygons(), *_rotation(angle), zoom, *translation)
+        drawn, screen = _cull(self._world_polygons(), self._world_reach, *_rotation(angle), zoom, *translation)
         return drawn, screen[drawn]
 
     def _polygon_color(self, index: int):
@@ -614,15 +655,16 @@ class FastCarRacing(stock.CarRacing):
         guaranteed to match pygame."""
         if not self._compiled_drawing:
             return None
-        playfield, covered = _playfield(self._playfield, *_rotation(angle), zoom, *translation)
-        drawn, world = self._visible_polygons(zoom, translation, angle)
-        car = self._car_polygons(zoom, translation, angle)
-        world_colors = self._world_pixel_values(drawn)
-        background = self._plain_pixel(self.bg_color)
-        if world_colors is None or background is None or car is None or car[1].min() < 4:
-            return None  # (pygame draws triangles with another algorithm)
-        fits, *polygons = _scene_arrays(playfield, covered, world, world_colors, *car, background)
-        if not fits:
+        world = self._world_polygons()
+        road_rows = self._road_rows()
+        car = self._car_state()
+        background, grass = self._plain_pixel(self.bg_color), self._plain_pixel(self.grass_color)
+        if road_rows is None or car is None or background is None:
+            return None
+        drawable, covered, *polygons = _scene(world, self._world_reach, len(self._grass_corners),
+                                              -1 if grass is None else grass, road_rows, self._playfield,
+                                              *_rotation(angle), zoom, *translation, *car, background)
+        if not drawable:
             return None
         return (background if covered else 0, *polygons)  # (a new stock surface is black)
 
@@ -676,35 +718,24 @@ class FastCarRacing(stock.CarRacing):
         """The pixel gfxdraw writes for ``color`` if it is an opaque RGB colour; None if it would blend."""
         return self._gfx_pixel(color) if len(color) == 3 else None
 
-    def _world_pixel_values(self, drawn: np.ndarray) -> np.ndarray | None:
-        """Pixel values of the grass and road polygons ``drawn``: None where one colour is not a
-        plain RGB triple within 0..255 (pygame would reject it, or blend)."""
-        grass_count = len(self._grass_corners)
-        is_grass = drawn < grass_count
-        values = np.empty(len(drawn), dtype=np.int64)
-        grass = self._plain_pixel(self.grass_color) if len(drawn) and drawn[0] < grass_count else 0  # (sorted)
-        if grass is None:
+    def _road_rows(self) -> np.ndarray | None:
+        """The tiles' colours as rows (K, 3) of doubles, read now (visited tiles change colour):
+        ``envs.car_racing_track``'s rows, which the tiles' colours are views of, or made from
+        ``road_poly``'s colours; None where those are not three numbers each."""
+        if self._road_color_rows is not None:
+            return self._road_color_rows
+        try:
+            rows = np.array(self._road_colors, dtype=np.float64).reshape(len(self._road_colors), -1)
+        except (TypeError, ValueError):
             return None
-        if self._road_color_rows is not None:  # the tiles' colours are its rows (envs.car_racing_track)
-            return values if _road_pixels(drawn, grass_count, grass, self._road_color_rows, values) else None
-        values[is_grass] = grass
-        road_index = drawn[~is_grass] - grass_count
-        if len(road_index):
-            try:
-                road = [self._road_colors[index] for index in road_index.tolist()]
-                colors = np.array(road, dtype=np.float64)  # read now: visited tiles change colour
-            except (TypeError, ValueError):
-                return None
-            if colors.shape != (len(road_index), 3) or not np.all((colors > -1) & (colors < 256)):  # NaN too
-                return None
-            rgb = np.trunc(colors).astype(np.int64)  # the stock's int(c): 0..255
-            values[~is_grass] = (rgb[:, 0] << 16) | (rgb[:, 1] << 8) | rgb[:, 2]  # XRGB8888 (_make_surfaces)
-        return values
+        return rows if rows.shape[1] == 3 else None
 
-    def _car_polygons(self, zoom, translation, angle) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """Screen corners (one polygon after the other), corner counts and pixel values of the car,
-        in ``Car.draw``'s order (``gymnasium/envs/box2d/car_dynamics.py``; no skid marks): each
-        body's fixtures, a wheel's white mark right after it; None if a colour is not plain RGB."""
+    def _car_state(self) -> tuple | None:
+        """``_car_screen``'s arguments before the camera: the car's fixtures (owners, starts,
+        local corners), the bodies' poses, which are wheels and their phases, and the pixel values
+        of the bodies and of the wheel mark; drawn in ``Car.draw``'s order
+        (``gymnasium/envs/box2d/car_dynamics.py``; no skid marks): each body's fixtures, a wheel's
+        white mark right after it. None if a colour is not plain RGB."""
         bodies = self.car.drawlist
         if self._car_source is not self.car:
             fixtures = [(index, np.array(fixture.shape.vertices, dtype=np.float32))
@@ -721,8 +752,7 @@ class FastCarRacing(stock.CarRacing):
         colors = self._car_pixel_values(tuple(tuple(body.color) for body in bodies), car_dynamics.WHEEL_WHITE)
         if colors is None:
             return None
-        return _car_screen(*self._car_fixtures, poses, np.array(phased), phases, *colors, *_rotation(angle), zoom,
-                           *translation)
+        return (*self._car_fixtures, poses, np.array(phased), phases, *colors)
 
     def _car_pixel_values(self, colors: tuple, white) -> tuple[np.ndarray, int] | None:
         """The bodies' pixels and the wheel mark's, as ``Car.draw`` makes them (``int(c * 255)``)
