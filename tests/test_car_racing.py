@@ -222,6 +222,11 @@ def test_compiled_culling_is_the_numpy_definition():
         angle = rng.uniform(-10, 10) if case % 3 else quarter  # pygame's exact quarter turns too
         zoom = float(rng.choice([0.6, 16.2, rng.uniform(0.6, 16.2), 1e9]))  # 1e9: beyond Sint16
         translation = (rng.uniform(-3000, 3000), rng.uniform(-3000, 3000))
+        if case % 4 == 1:  # a corner of some polygon exactly on a bound of the margin test
+            corner = to_screen(fast._world_polygons()[rng.integers(300)][rng.integers(4)], zoom, (0.0, 0.0), angle)
+            bound = rng.choice([-MAX_SHAPE_DIM, 1000 + MAX_SHAPE_DIM, -MAX_SHAPE_DIM, 800 + MAX_SHAPE_DIM])
+            translation = (bound - corner[0], rng.uniform(-3000, 3000)) if case % 8 == 1 else (
+                rng.uniform(-3000, 3000), bound - corner[1])
         expected = plain_visible_polygons(fast._world_polygons(), zoom, translation, angle)
         drawn, screen = fast._visible_polygons(zoom, translation, angle)
         assert np.array_equal(drawn, expected[0]) and np.array_equal(screen, expected[1])
