@@ -728,7 +728,7 @@ class FastCarRacing(stock.CarRacing):
             rows = np.array(self._road_colors, dtype=np.float64).reshape(len(self._road_colors), -1)
         except (TypeError, ValueError):
             return None
-        return rows if rows.shape[1] == 3 else None
+        return rows if rows.shape[1] == 3 or not len(rows) else None
 
     def _car_state(self) -> tuple | None:
         """``_car_screen``'s arguments before the camera: the car's fixtures (owners, starts,

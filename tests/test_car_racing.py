@@ -152,6 +152,23 @@ def test_random_actions_then_a_second_reset_of_the_same_instance():
     assert len(assert_same_episode(15, actions[:60], stock=stock, fast=fast)) == 60
 
 
+def test_a_road_poly_replaced_after_the_reset_is_drawn_from_its_colours_at_each_frame():
+    """Without the track builder's colour rows (``road_poly`` replaced), the compiled drawing reads
+    the tiles' colours at each frame: the visited ones change colour in place."""
+    stock, fast = pair()
+    follow = track_driver(40.0, 6)
+    for env in (stock, fast):
+        env.reset(seed=18)
+    fast.unwrapped.road_poly = list(fast.unwrapped.road_poly)
+    for step in range(150):
+        action = follow(stock.unwrapped)
+        expected, got = stock.step(action), fast.step(action)
+        assert np.array_equal(expected[0], got[0]) and expected[1:] == got[1:], f"step {step}"
+    fast_env = fast.unwrapped
+    assert fast_env._road_color_rows is None and fast_env._road_rows() is not None
+    assert fast_env._observe_from_spans(fast_env._camera()) is not None  # (not pygame's drawing)
+    assert stock.unwrapped.tile_visited_count > 10
+
 def test_rgb_array_frames_skid_marks_included():
     rng = np.random.default_rng(16)
     actions = [np.array([rng.uniform(-1, 1), 1.0, 0.0 if step < 60 else 0.9], dtype=np.float32) for step in range(90)]
