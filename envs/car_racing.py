@@ -284,6 +284,7 @@ def _scene(world, reach, grass_count, grass, road_rows, playfield_corners, quart
                                                                       car_corners, car_counts, car_values, background)
     return drawable and fits, covered, xs, ys, polygon_starts, colors, antialiased
 
+
 def box2d_transform(cos_sin_position: np.ndarray, local: np.ndarray) -> np.ndarray:
     """``b2Transform * b2Vec2`` of pybox2d for rows of (cos, sin, x, y) and of local points, bit for bit.
 
@@ -724,11 +725,13 @@ class FastCarRacing(stock.CarRacing):
         ``road_poly``'s colours; None where those are not three numbers each."""
         if self._road_color_rows is not None:
             return self._road_color_rows
+        if not self._road_colors:
+            return np.empty((0, 3))
         try:
             rows = np.array(self._road_colors, dtype=np.float64).reshape(len(self._road_colors), -1)
         except (TypeError, ValueError):
             return None
-        return rows if rows.shape[1] == 3 or not len(rows) else None
+        return rows if rows.shape[1] == 3 else None
 
     def _car_state(self) -> tuple | None:
         """``_car_screen``'s arguments before the camera: the car's fixtures (owners, starts,

@@ -168,6 +168,13 @@ def test_a_road_poly_replaced_after_the_reset_is_drawn_from_its_colours_at_each_
     assert fast_env._road_color_rows is None and fast_env._road_rows() is not None
     assert fast_env._observe_from_spans(fast_env._camera()) is not None  # (not pygame's drawing)
     assert stock.unwrapped.tile_visited_count > 10
+    for env in (stock, fast):  # no road drawn at all: the grass only, still compiled
+        env.unwrapped.road_poly = []
+    for step in range(5):
+        action = follow(stock.unwrapped)
+        expected, got = stock.step(action), fast.step(action)
+        assert np.array_equal(expected[0], got[0]) and expected[1:] == got[1:], f"no road, step {step}"
+    assert fast_env._observe_from_spans(fast_env._camera()) is not None
 
 def test_rgb_array_frames_skid_marks_included():
     rng = np.random.default_rng(16)
