@@ -282,12 +282,13 @@ def observe(records, counts, background, text, text_x, text_y, x_schedule, y_sch
                         break
                     if column == 0:
                         shrunk[0] = _exact_pixel(row, 0, x_schedule)
-                    elif fewest == _FEWEST:  # (a constant: the summing loop is unrolled)
-                        shrunk[column] = _mixed_pixel(row, x_shared[column - 1] + 1, x_shared[column], _FEWEST,
-                                                      x_weights[column], x_carried[column - 1], x_reciprocal)
                     else:
-                        shrunk[column] = _mixed_pixel(row, x_shared[column - 1] + 1, x_shared[column], fewest,
-                                                      x_weights[column], x_carried[column - 1], x_reciprocal)
+                        first, last = x_shared[column - 1] + 1, x_shared[column]
+                        weight, carry = x_weights[column], x_carried[column - 1]
+                        if fewest == _FEWEST:  # (a constant: the summing loop is unrolled)
+                            shrunk[column] = _mixed_pixel(row, first, last, _FEWEST, weight, carry, x_reciprocal)
+                        else:
+                            shrunk[column] = _mixed_pixel(row, first, last, fewest, weight, carry, x_reciprocal)
                     start = column + 1
             mixed[columns] = True
         if output_row < shared.shape[0] and y == shared[output_row]:
