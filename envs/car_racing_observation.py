@@ -32,14 +32,14 @@ import numpy as np
 from numba import njit
 from numba.cpython.unsafe.numbers import trailing_zeros
 
-from envs.pygame_raster import SPAN_BITS, append, blend, draw_polygon, gfx_aapolygon, gfx_filled_polygon
+from envs.pygame_raster import SPAN_BITS, append, blend, draw_polygon, gfx_aapolygon, gfx_filled_polygon, span_record
 
 _FLAGS = {"cache": True, "nogil": True}
 _ONE = 0x4000  # the SSE2 filter's unit: a source pixel is 0x4000
 _LANE = 0xFFFF
 _PALETTE = 64  # colours whose uniform output rows are kept (a frame has about a dozen)
 _FEWEST = 9  # whole source pixels of most output pixels from 1000 to 96 (observe: a constant)
-_RECENT = 8  # colours whose palette rows are found without the table (a power of two)
+_RECENT = 32  # colours whose palette rows are found without the table (a power of two)
 
 
 def shrink_schedule(source: int, target: int) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
@@ -173,11 +173,19 @@ def _mixed_pixel(row, first, last, fewest, weight, carried, reciprocal):
     return blue | (green << 16) | (red << 32)
 
 
+@njit(inline="always")
+def _recent_slot(color):
+    """Where ``color`` (24 bits) is kept in the cache of recent colours: Fibonacci hashing, the
+    high bits of a 32-bit product. A hash of the low bits had put white with black and blue with
+    purple (the dashboard's colours), and missed about once per row."""
+    return 2 * (((color * 2654435769) >> 27) & (_RECENT - 1))
+
+
 @njit(inline="never", **_FLAGS)
 def _missed_entry(color, palette, rows, x_schedule, cache):
     """``_palette_row`` for a colour the cache of recent colours lacks, then kept in the cache."""
     entry = _palette_row(color, palette, rows, x_schedule)
-    slot = 2 * ((color ^ (color >> 9)) & (_RECENT - 1))
+    slot = _recent_slot(color)
     cache[slot], cache[slot + 1] = color, entry
     return entry
 
@@ -268,7 +276,7 @@ def observe(records, counts, background, text, text_x, text_y, x_schedule, y_sch
                     word &= word - np.uint64(1)
                     if column > start:  # start..column - 1: one colour
                         color = np.int64(row[x_shared[start]])
-                        slot = 2 * ((color ^ (color >> 9)) & (_RECENT - 1))
+                        slot = _recent_slot(color)
                         entry = cache[slot + 1]
                         if cache[slot] != color:
                             entry = _missed_entry(color, palette, rows, x_schedule, cache)
@@ -332,6 +340,7 @@ class SpanObservation:
         if width > 1 << SPAN_BITS:
             raise ValueError(f"span records hold x up to {(1 << SPAN_BITS) - 1}, the picture is {width} wide")
         self.records = np.empty((height, capacity), dtype=np.int64)
+        self._capacity = capacity
         whole = np.diff(self.x_schedule[1], prepend=-1)[1:] - 1  # whole source pixels of columns 1, 2, ...
         if len(whole) and whole.max() - whole.min() > 1:
             raise ValueError(f"smoothscale's walk from {width} to {columns} sums {set(whole.tolist())} whole pixels")
@@ -342,9 +351,7 @@ class SpanObservation:
                       np.empty((_PALETTE, columns), dtype=np.int64),
                       np.full(2 * _RECENT, -1, dtype=np.int64), int(whole.min()) if len(whole) else 0)
         self._work[4][0] = 0
-        # record_polygons' scratch: one polygon's fill, one span per row, and the cover it makes
-        self._fill = (np.empty((height, 1), dtype=np.int64), np.empty(height, dtype=np.int64), height, width)
-        self._cover = np.empty((2, height), dtype=np.int64)
+        self._cover = np.empty((3, height), dtype=np.int64)  # record_polygons' scratch: one polygon's fill
 
     def target(self) -> tuple:
         """An empty span list for ``envs.pygame_raster``'s drawing functions."""
@@ -353,15 +360,20 @@ class SpanObservation:
 
     def record_polygons(self, target: tuple, flip: bool, *polygons) -> None:
         """``pygame_raster.draw_polygons``'s arguments after the target and flip."""
-        record_polygons(target, flip, *polygons, self._fill, self._cover)
+        record_polygons(target, flip, *polygons, self._cover)
 
     def overflowed(self) -> bool:
-        """True (and the list grown) if the last drawing recorded more spans in a row than it could keep."""
-        most = int(self.counts.max())
-        if most <= self.records.shape[1]:
-            return False
-        self.records = np.empty((self.size[1], 2 * most), dtype=np.int64)
-        return True
+        """True (and the list grown) if the last drawing recorded more spans in a row than it could keep.
+        A list grown for a crowded frame (the zoomed-out first frames of an episode) shrinks again
+        once a frame needs less than a quarter of it, keeping what that frame recorded: ``observe``
+        reads the rows' records, and rows far apart in memory cost it about 3 %."""
+        most, capacity = int(self.counts.max()), self.records.shape[1]
+        if most > capacity:
+            self.records = np.empty((self.size[1], 2 * most), dtype=np.int64)
+            return True
+        if capacity > self._capacity and 4 * most < capacity:
+            self.records = np.ascontiguousarray(self.records[:, :max(self._capacity, 2 * most)])
+        return False
 
     def observe(self, background: int, text: np.ndarray, text_x: int, text_y: int) -> np.ndarray:
         out = np.empty((len(self.y_schedule[1]), len(self.x_schedule[1]), 3), dtype=np.uint8)
@@ -371,18 +383,17 @@ class SpanObservation:
 
 
 @njit(**_FLAGS)
-def record_polygons(spans, flip, xs, ys, starts, colors, antialiased, fill, cover):
+def record_polygons(spans, flip, xs, ys, starts, colors, antialiased, cover):
     """``pygame_raster.draw_polygons`` into a span list, less what cannot show.
 
     An anti-aliased polygon's edge pixels that its own fill, drawn right after them, covers are
-    never seen. The fill is drawn first into ``fill`` (a span list of one record per row, of the
-    picture's height); where it has at most one span per row, those spans are the ``cover`` (int64
-    (2, height)) behind which the edge is drawn, which leaves those pixels out, and then they are
-    recorded. Otherwise the edge and the fill are recorded in order, and the hidden pixels removed
-    (``_drop_covered``).
+    never seen. The fill is drawn first into ``cover`` (int64 (3, height): per row the last span's
+    x1 and x2 and how many spans; ``pygame_raster``'s cover target); where it has at most one span
+    per row, those spans are the cover behind which the edge is drawn, which leaves those pixels
+    out, and then they are recorded. Otherwise the edge and the fill are recorded in order, and the
+    hidden pixels removed (``_drop_covered``).
     """
     records, counts, height, width = spans
-    fill_records, fill_counts = fill[0], fill[1]
     for k in range(colors.shape[0]):
         polygon_xs, polygon_ys = xs[starts[k]:starts[k + 1]], ys[starts[k]:starts[k + 1]]
         if not antialiased[k]:
@@ -393,16 +404,16 @@ def record_polygons(spans, flip, xs, ys, starts, colors, antialiased, fill, cove
             continue
         if flip:  # the rows of the records
             low, high = height - 1 - high, height - 1 - low
-        fill_counts[low:high + 1] = 0
-        gfx_filled_polygon(fill, flip, polygon_xs, polygon_ys, colors[k])
-        if fill_counts[low:high + 1].max() <= 1:
+        cover[2, low:high + 1] = 0
+        gfx_filled_polygon((cover, height, width), flip, polygon_xs, polygon_ys, colors[k])
+        if cover[2, low:high + 1].max() <= 1:
             for row in range(low, high + 1):
-                cover[0, row], cover[1, row], _, _ = _unpack(fill_records[row, 0]) if fill_counts[row] else (
-                    width, -1, 0, 0)  # (an empty row covers nothing)
+                if cover[2, row] == 0:  # (an empty row covers nothing)
+                    cover[0, row], cover[1, row] = width, -1
             gfx_aapolygon((records, counts, height, width, cover), flip, polygon_xs, polygon_ys, colors[k])
             for row in range(low, high + 1):
-                if fill_counts[row]:
-                    append(records, counts, row, fill_records[row, 0])
+                if cover[2, row]:
+                    append(records, counts, row, span_record(cover[0, row], cover[1, row], colors[k], 255))
             continue
         before, between = cover[0], cover[1]  # (the cover's rows, unused on this path, as scratch)
         before[low:high + 1] = counts[low:high + 1]

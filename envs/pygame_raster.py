@@ -75,8 +75,10 @@ def blend(old, color, alpha):
 #   bits). Past a row's capacity writes are counted, not stored, so that the caller can grow the
 #   list and draw again;
 # - a span list behind a cover ``(records, counts, height, width, cover)``: the same, less the
-#   writes that lie wholly within ``cover[0, y]..cover[1, y]`` (int64, (2, height)), which the caller
-#   knows an opaque span it records after them hides.
+#   writes that lie wholly within ``cover[0, y]..cover[1, y]`` (int64, (3, height)), which the caller
+#   knows an opaque span it records after them hides;
+# - a cover ``(cover, height, width)``: row y's last write is ``cover[0, y]..cover[1, y]`` and
+#   ``cover[2, y]`` counts the writes (opaque spans only: what a fill makes).
 # The drawing code is the same for all.
 
 SPAN_BITS = 10  # bits of x1 and of x2 in a span record
@@ -101,13 +103,15 @@ def _put_blend(target, flip, x, y, color, alpha):
 
 
 def _put_record(target, row, x1, x2, color, alpha):
-    """A write into row ``row`` of a span list (with or without a cover)."""
+    """A write into row ``row`` of a span list (with or without a cover) or of a cover."""
 
 
 @overload(_size, jit_options=_FLAGS)
 def _size_overload(target):
     if isinstance(target, types.Array):
         return lambda target: (target.shape[0], target.shape[1])
+    if len(target) == 3:
+        return lambda target: (target[1], target[2])
     return lambda target: (target[2], target[3])
 
 
@@ -119,7 +123,7 @@ def _put_span_overload(target, flip, y, x1, x2, color):
         return write
 
     def record(target, flip, y, x1, x2, color):
-        _put_record(target, _row(target[2], flip, y), x1, x2, color, 255)
+        _put_record(target, _row(_size(target)[0], flip, y), x1, x2, color, 255)
     return record
 
 
@@ -132,12 +136,14 @@ def _put_blend_overload(target, flip, x, y, color, alpha):
         return write
 
     def record(target, flip, x, y, color, alpha):
-        _put_record(target, _row(target[2], flip, y), x, x, color, alpha)
+        _put_record(target, _row(_size(target)[0], flip, y), x, x, color, alpha)
     return record
 
 
 @overload(_put_record, jit_options=_FLAGS)
 def _put_record_overload(target, row, x1, x2, color, alpha):
+    if len(target) == 3:
+        return lambda target, row, x1, x2, color, alpha: _cover(target[0], row, x1, x2)
     if len(target) == 5:
         return lambda target, row, x1, x2, color, alpha: _record_behind(target[0], target[1], target[4], row, x1,
                                                                         x2, color, alpha)
@@ -157,6 +163,13 @@ def append(records, counts, row, record, counted=1):
     counts[row] = index + counted
     if index < records.shape[1]:
         records[row, index] = record
+
+
+@njit(**_FLAGS)
+def _cover(cover, row, x1, x2):
+    """A span into a cover: the row's last span, and one more counted."""
+    cover[0, row], cover[1, row] = x1, x2
+    cover[2, row] += 1
 
 
 @njit(**_FLAGS)
@@ -231,55 +244,48 @@ def gfx_filled_polygon(pixels, flip, xs, ys, color):
 
     Its edges are counted on the rows ``_row_crossings`` says, and SDL_gfx computes each crossing in
     16.16 fixed point as ``(65536 (y - y1)) / (y2 - y1) * (x2 - x1) + 65536 x1``; here each edge
-    carries that quotient and its remainder from row to row (adding ``65536 // d`` and ``65536 % d``):
-    the same integers without a division per row.
+    walks its rows carrying that quotient and its remainder (adding ``65536 // d`` and
+    ``65536 % d``): the same integers without a division per row. The crossings are gathered edge
+    by edge, then each row's are sorted and filled between, as SDL_gfx does row by row.
     """
     count = xs.shape[0]
     low, high = ys.min(), ys.max()
     first, last = max(low, 0), min(high, _size(pixels)[0] - 1)
     if first > last:
         return  # rows off the surface draw nothing: they are not scanned
-    # per edge, taken from its upper corner (a column each): its first row, its last row counted,
-    # 65536 x1, x2 - x1, y2 - y1, the quotient and remainder at the row scanned, their steps
-    edges = np.empty((9, count), dtype=np.int64)
-    top, bottom, origin, run, rise, quotient, remainder, step, carry = edges
-    crossings = np.empty(count, dtype=np.int64)
-    active = 0
-    for i in range(count):
+    crossings = np.empty((last - first + 1, count), dtype=np.int64)  # per row from ``first``
+    found = np.zeros(last - first + 1, dtype=np.int64)
+    for i in range(count):  # each edge from its upper corner, over the rows it is counted on
         previous = count - 1 if i == 0 else i - 1
         x1, y1, x2, y2 = xs[previous], ys[previous], xs[i], ys[i]
         if y1 > y2:
             x1, y1, x2, y2 = x2, y2, x1, y1
         if y1 == y2:
             continue
-        start = max(y1, first)
-        top[active], bottom[active] = y1, (y2 if y2 == high else y2 - 1)
-        origin[active], run[active], rise[active] = 65536 * x1, x2 - x1, y2 - y1
-        quotient[active], remainder[active] = divmod(65536 * (start - y1), y2 - y1)
-        step[active], carry[active] = divmod(65536, y2 - y1)
-        active += 1
-    for y in range(first, last + 1):
-        found = 0
-        for e in range(active):
-            if top[e] <= y:
-                if y <= bottom[e]:
-                    crossings[found] = quotient[e] * run[e] + origin[e]
-                    found += 1
-                more = remainder[e] + carry[e]
-                wraps = more >= rise[e]  # (no branch: it would be mispredicted)
-                quotient[e] += step[e] + wraps
-                remainder[e] = more - rise[e] * wraps
-        if found == 2:  # a convex polygon's row
-            left, right = crossings[0], crossings[1]
-            crossings[0], crossings[1] = min(left, right), max(left, right)
+        start, stop = max(y1, first), min(y2 if y2 == high else y2 - 1, last)
+        origin, run, rise = 65536 * x1, x2 - x1, y2 - y1
+        quotient, remainder = divmod(65536 * (start - y1), rise)
+        step, carry = divmod(65536, rise)
+        for y in range(start - first, stop - first + 1):
+            crossings[y, found[y]] = quotient * run + origin
+            found[y] += 1
+            remainder += carry
+            wraps = remainder >= rise  # (no branch: it would be mispredicted)
+            quotient += step + wraps
+            remainder -= rise * wraps
+    for y in range(last - first + 1):
+        row = crossings[y]
+        if found[y] == 2:  # a convex polygon's row
+            left, right = row[0], row[1]
+            row[0], row[1] = min(left, right), max(left, right)
         else:
-            _sort(crossings, found)
-        for i in range(0, found - 1, 2):
-            left = crossings[i] + 1
+            _sort(row, found[y])
+        for i in range(0, found[y] - 1, 2):
+            left = row[i] + 1
             left = (left >> 16) + ((left & 32768) >> 15)
-            right = crossings[i + 1] - 1
+            right = row[i + 1] - 1
             right = (right >> 16) + ((right & 32768) >> 15)
-            _gfx_hline(pixels, flip, left, right, y, color)
+            _gfx_hline(pixels, flip, left, right, first + y, color)
 
 
 @njit(**_FLAGS)
