@@ -340,7 +340,6 @@ class SpanObservation:
         if width > 1 << SPAN_BITS:
             raise ValueError(f"span records hold x up to {(1 << SPAN_BITS) - 1}, the picture is {width} wide")
         self.records = np.empty((height, capacity), dtype=np.int64)
-        self._capacity = capacity
         whole = np.diff(self.x_schedule[1], prepend=-1)[1:] - 1  # whole source pixels of columns 1, 2, ...
         if len(whole) and whole.max() - whole.min() > 1:
             raise ValueError(f"smoothscale's walk from {width} to {columns} sums {set(whole.tolist())} whole pixels")
@@ -363,17 +362,12 @@ class SpanObservation:
         record_polygons(target, flip, *polygons, self._cover)
 
     def overflowed(self) -> bool:
-        """True (and the list grown) if the last drawing recorded more spans in a row than it could keep.
-        A list grown for a crowded frame (the zoomed-out first frames of an episode) shrinks again
-        once a frame needs less than a quarter of it, keeping what that frame recorded: ``observe``
-        reads the rows' records, and rows far apart in memory cost it about 3 %."""
-        most, capacity = int(self.counts.max()), self.records.shape[1]
-        if most > capacity:
-            self.records = np.empty((self.size[1], 2 * most), dtype=np.int64)
-            return True
-        if capacity > self._capacity and 4 * most < capacity:
-            self.records = np.ascontiguousarray(self.records[:, :max(self._capacity, 2 * most)])
-        return False
+        """True (and the list grown) if the last drawing recorded more spans in a row than it could keep."""
+        most = int(self.counts.max())
+        if most <= self.records.shape[1]:
+            return False
+        self.records = np.empty((self.size[1], 2 * most), dtype=np.int64)
+        return True
 
     def observe(self, background: int, text: np.ndarray, text_x: int, text_y: int) -> np.ndarray:
         out = np.empty((len(self.y_schedule[1]), len(self.x_schedule[1]), 3), dtype=np.uint8)

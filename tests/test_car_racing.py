@@ -422,27 +422,6 @@ def test_recorded_spans_are_the_drawing_less_the_edges_its_own_fill_hides():
     assert several > 0  # rows of several fill spans (non-convex polygons) were met
 
 
-def test_a_span_list_grown_for_a_crowded_drawing_shrinks_back_keeping_what_was_drawn():
-    """The first frames of an episode are zoomed out and crowded: the list grows for them (records
-    lost past the capacity, so drawn again), and shrinks once a drawing needs less than a quarter
-    of it, with that drawing's records kept as they were."""
-    width, height = 1000, 800
-    spans = SpanObservation(width, height, 96, 96, capacity=4)
-    stripes = np.arange(0, 600, 10)  # 60 stripes of 5 pixels: 60 records in each of rows 0-9
-    crowded = (np.stack([stripes, stripes + 4, stripes + 4, stripes], axis=1).ravel(), np.tile([0, 0, 9, 9], 60),
-               np.arange(0, 241, 4), np.arange(60, dtype=np.int64), np.zeros(60, dtype=np.bool_))
-    spans.record_polygons(spans.target(), False, *crowded)
-    assert spans.overflowed() and spans.records.shape == (height, 120)
-    spans.record_polygons(spans.target(), False, *crowded)
-    assert not spans.overflowed() and spans.records.shape == (height, 120)
-    sparse = tuple(part[:20] if k < 2 else part[:6] if k == 2 else part[:5] for k, part in enumerate(crowded))
-    spans.record_polygons(spans.target(), False, *sparse)  # 5 records a row: under a quarter of 120
-    drawn = [spans.records[row, :spans.counts[row]].tolist() for row in range(height)]
-    assert not spans.overflowed() and spans.records.shape == (height, 10)
-    assert [spans.records[row, :spans.counts[row]].tolist() for row in range(height)] == drawn
-    assert drawn[0] == [pygame_raster.span_record(x, x + 4, color, 255) for x, color in zip(range(0, 50, 10), range(5))]
-
-
 def expected_surface_pixel(color) -> int:
     return (color[0] << 16) | (color[1] << 8) | color[2]
 
