@@ -176,6 +176,7 @@ def test_a_road_poly_replaced_after_the_reset_is_drawn_from_its_colours_at_each_
         assert np.array_equal(expected[0], got[0]) and expected[1:] == got[1:], f"no road, step {step}"
     assert fast_env._observe_from_spans(fast_env._camera()) is not None
 
+
 def test_rgb_array_frames_skid_marks_included():
     rng = np.random.default_rng(16)
     actions = [np.array([rng.uniform(-1, 1), 1.0, 0.0 if step < 60 else 0.9], dtype=np.float32) for step in range(90)]
