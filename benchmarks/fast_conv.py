@@ -1,10 +1,12 @@
 #!/usr/bin/env python
-"""The pixel CNN, torch's path against ``--fast_conv``'s compiled pass (issue 21, item 3), in one run.
+"""The pixel CNN: torch's path, the default (torch's bits through the ordered kernels where they give them)
+and ``--fast_conv``'s compiled pass (issue 21, item 3), in one run.
 
     python benchmarks/fast_conv.py
 
-- per frame: both paths on the same real CarRacing-v3 observations and the same weights, one
-  thread, CPU time of this process, alternating round by round; the medians over ``--rounds``;
+- per frame: the three paths on the same real CarRacing-v3 observations and the same weights, one
+  thread, CPU time of this process, alternating round by round; the medians over ``--rounds``; and
+  whether the default's features equal torch's path's on every frame;
 - the features: the largest difference between the two paths on those frames, for PyTorch's default
   initialisation (the static network's generation 0) and N(0, 1) (the Hebbian network's CNN);
 - tanh: the largest error of the compiled pass's rational tanh against ``math.tanh`` (double), and
@@ -72,21 +74,26 @@ def per_frame(features: ConvFeatures, frames: list[np.ndarray]) -> float:
 
 def speed(frames: list[np.ndarray], rounds: int) -> None:
     weights = conv_weights("default", 1)
-    paths = {"torch": ConvFeatures(weights, SHAPES), "fast": ConvFeatures(weights, SHAPES, fast=True)}
-    per_frame(paths["fast"], frames[:1])  # compiled (or loaded from numba's cache) before timing
+    paths = {"torch": ConvFeatures(weights, SHAPES, ordered=False), "default": ConvFeatures(weights, SHAPES),
+             "fast": ConvFeatures(weights, SHAPES, fast=True)}
+    for features in paths.values():
+        per_frame(features, frames[:1])  # compiled (or loaded from numba's cache) before timing
+    same = all(np.array_equal(paths["default"](frame).view(np.uint32), paths["torch"](frame).view(np.uint32))
+               for frame in frames)
     times: dict[str, list[float]] = {name: [] for name in paths}
     for _ in range(rounds):
         for name, features in paths.items():
             times[name].append(per_frame(features, frames))
-    torch_us, fast_us = (statistics.median(times[name]) * 1e6 for name in paths)
-    print(f"per frame ({len(frames)} CarRacing frames, median of {rounds} rounds): torch {torch_us:.0f} us, "
-          f"--fast_conv {fast_us:.0f} us, {torch_us / fast_us:.2f}x")
+    torch_us, default_us, fast_us = (statistics.median(times[name]) * 1e6 for name in paths)
+    print(f"per frame ({len(frames)} CarRacing frames, median of {rounds} rounds): torch's path {torch_us:.0f} us; "
+          f"the default ({paths['default'].path}) {default_us:.0f} us, {torch_us / default_us:.2f}x, torch's bits on "
+          f"every frame: {same}; --fast_conv {fast_us:.0f} us, {torch_us / fast_us:.2f}x")
 
 
 def differences(frames: list[np.ndarray]) -> None:
     for kind in ("default", "normal"):
         weights = conv_weights(kind, 2)
-        torch_path, fast = ConvFeatures(weights, SHAPES), ConvFeatures(weights, SHAPES, fast=True)
+        torch_path, fast = ConvFeatures(weights, SHAPES, ordered=False), ConvFeatures(weights, SHAPES, fast=True)
         largest = max(float(np.abs(torch_path(frame) - fast(frame)).max()) for frame in frames)
         print(f"features, {kind} weights: largest |torch - fast| over {len(frames)} frames {largest:.2e}")
 

@@ -2,20 +2,40 @@
 
 conv C->6 (k3, s1) -> tanh -> max-pool 2 -> conv 6->8 (k5, s2) -> tanh -> max-pool 2 -> 648 features,
 C the observation's channels (3 for the original's RGB frames).
-Its weights are evolved and never plastic. Two implementations compute it from the same weights:
+Its weights are evolved and never plastic. Three implementations compute it from the same weights:
 
-- the default, single-threaded torch (``conv2d``, ``tanh_``) with ``max_pool2`` between them: the numbers
-  every run has been trained and pinned with (``tests/test_pinned.py``). torch is imported only when it
-  is built, so state-vector runs never pay for it.
-- ``--fast_conv`` (``fast_features``): one compiled pass over preallocated buffers, about 4x faster on
-  one frame (docs/speed-carracing.md). It differs from torch in the low bits (features within about
-  1e-5): its own summation order, and the dense head's rational tanh (``policies.kernels``) evaluated
-  without fastmath (within 4.1e-7 of tanh over every float32), so it is opt-in.
+- torch's: single-threaded ``conv2d`` and ``tanh_``, with ``max_pool2`` between them. Its numbers
+  are the ones every run has been trained and pinned with (``tests/test_pinned.py``). torch is
+  imported only when it is built, so state-vector runs never pay for it.
+- the default for RGB frames where it gives torch's bits (``torch_order_holds``, checked once per
+  process): the same function with each convolution compiled (``ordered_conv1``, ``ordered_conv2``)
+  and summed in the order of torch's own kernel, and torch's ``tanh_`` applied in place to the
+  same (C, H, W) planes torch's convolutions would return: about 1.8x faster than torch's path on
+  one frame (0.37-0.43 against 0.68-0.77 ms here; torch's tanh is now most of it). Where the check
+  fails (another CPU, whose oneDNN kernel sums in another order, or has no FMA), and for other
+  channel counts, torch's path runs. The check costs about 0.5 s, once per process.
+- ``--fast_conv`` (``fast_features``): one compiled pass over preallocated buffers, about 4x faster than
+  torch's path on one frame (docs/speed-carracing.md). It differs from torch in the low bits (features
+  within about 1e-5): its own summation order, and the dense head's rational tanh
+  (``policies.kernels``) evaluated without fastmath (within 4.1e-7 of tanh over every float32), so it
+  is opt-in.
 
 The max-pooling is ``max_pool2``, a compiled loop that returns what torch's ``max_pool2d(x, 2)``
 returns, bit for bit: on this 2-core machine torch's kernel took about 0.3 ms for the first
 pooling, the loop 0.02 ms, and a forward pass went from about 1.1 to 0.75 ms (issue 9: with the
 fast CarRacing, the pixel policy had become a third of a step).
+
+Torch's order. For these shapes torch's ``conv2d`` runs oneDNN's direct convolution (``jit:avx2`` on
+this machine), which starts each output at +0 and adds the window's taps row by row, column by
+column, channel by channel, each with one fused multiply-add (``fma``: one rounding). The ordered
+kernels do the same, each output row in passes (one per row of the window for conv1, one per
+tap for conv2) whose partial sums go through memory exactly: a loop over a row's pixels with a
+few taps in it vectorises, one with all 150 of conv2's does not. conv2's stride-2 taps read the
+pooled planes split into even and odd columns, so that they too are contiguous. Rows are computed
+whole vectors wide (88 of 82 pixels, 24 of 19): what lies past a row's end spills into the next
+row, which is computed after it, and the buffers end in ``SLACK`` spare floats. (Where two NaNs with
+different payloads meet in one multiply-add, which payload comes out may differ from torch's; a NaN
+stays a NaN.)
 
 The compiled pass takes each window's maximum before its tanh: tanh is non-decreasing, so
 tanh(max x) = max tanh(x), with a quarter of the tanh calls (the rational tanh steps down by one ulp
@@ -27,16 +47,26 @@ unroll and the loop over a row's pixels vectorises without fastmath.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.core.extending import intrinsic
 
 from policies.kernels import _TANH_CLAMP, _TANH_P, _TANH_Q
-from policies.network import PIXEL_SIZE, NetworkSpec
+from policies.network import PIXEL_SIZE, NetworkSpec, conv_shapes
 
-K1, K2 = 3, 5  # the kernel sizes of policies.network.conv_shapes
+RGB = 3  # the channels the ordered kernels are compiled for
+(HIDDEN, _, K1, _), (OUTS2, _, K2, _) = conv_shapes(RGB)  # conv1's 6 outputs (conv2's inputs), 3x3; conv2's 8, 5x5
 STRIDE2 = 2
 SIZE1 = PIXEL_SIZE - K1 + 1  # 82: conv1's output
-SIZE2 = ((SIZE1 // 2 - K2) // STRIDE2 + 1) // 2 * 2  # 18 of conv2's 19: the rows and columns its pooling keeps
+POOLED1 = SIZE1 // 2  # 41
+FULL2 = (POOLED1 - K2) // STRIDE2 + 1  # 19: conv2's output
+SIZE2 = FULL2 // 2 * 2  # 18 of conv2's 19: the rows and columns its pooling keeps
+WIDE1, WIDE2 = 88, 24  # the ordered kernels' rows, whole vectors of 8 floats: 82 and 19 pixels used
+COLUMNS = 32  # the width of each half (even, odd columns) of the split pooled planes: 21 and 20 used
+SLACK = 8  # spare floats after each flat buffer of the ordered path (a row spills at most 6 past its end)
 
 
 def worker_modules(net: NetworkSpec, fast: bool) -> tuple[str, ...]:
@@ -68,6 +98,21 @@ def max_pool2(planes: np.ndarray, pooled=None) -> np.ndarray:
                         largest = value
                 kept[column] = largest
     return pooled
+
+
+@intrinsic
+def fma(typingctx, a, b, c):
+    """``a * b + c`` in float32, rounded once: LLVM's ``llvm.fma``, the CPU's FMA instruction (a call to
+    libm's ``fmaf`` on a CPU without one)."""
+    if not (a == b == c == types.float32):
+        return None
+
+    def codegen(context, builder, signature, args):
+        kind = args[0].type
+        function = builder.module.declare_intrinsic("llvm.fma", [kind], ir.FunctionType(kind, [kind] * 3))
+        return builder.call(function, args)
+
+    return types.float32(types.float32, types.float32, types.float32), codegen
 
 
 _FAST = dict(cache=True, nogil=True, error_model="numpy")  # numpy's: a division without Python's zero check
@@ -126,33 +171,114 @@ def fast_features(obs, conv1, conv2, planes1, pooled1, planes2, features) -> np.
     _tanh_of_pooled(planes2, features.reshape(planes2.shape[0], SIZE2 // 2, SIZE2 // 2))
     return features
 
+@njit(inline="always")
+def _conv1_row(out, frame, conv1, o, y, ky, first):
+    """Adds the window's row ``ky`` to row y of conv1's output plane o (from +0 when ``first``)."""
+    at = (o * SIZE1 + y) * SIZE1
+    for x in range(WIDE1):
+        total = np.float32(0.0) if first else out[at + x]
+        for kx in range(K1):
+            for c in range(RGB):
+                total = fma(conv1[o, c, ky, kx], frame[(c * PIXEL_SIZE + y + ky) * PIXEL_SIZE + kx + x], total)
+        out[at + x] = total
+
+
+@njit(**_FAST)
+def ordered_conv1(out, frame, conv1) -> None:
+    """out (6 x 82 x 82 + SLACK, flat) = conv1 of frame (3 x 84 x 84 + SLACK, flat) with conv1 (6, 3, 3, 3), in
+    torch's order: per output, from +0, ``fma`` over the window's rows, columns, channels."""
+    for o in range(HIDDEN):
+        for y in range(SIZE1):
+            for ky in range(K1):
+                _conv1_row(out, frame, conv1, o, y, ky, ky == 0)
+
+
+@njit(inline="always")
+def _conv2_row(out, columns, conv2, o, y, ky, kx, first):
+    """Adds tap (ky, kx) of every channel to row y of conv2's output plane o (from +0 when ``first``)."""
+    at = (o * FULL2 + y) * FULL2
+    for x in range(WIDE2):
+        total = np.float32(0.0) if first else out[at + x]
+        for c in range(HIDDEN):
+            tap = ((c * POOLED1 + STRIDE2 * y + ky) * 2 + kx % 2) * COLUMNS + kx // 2 + x
+            total = fma(conv2[o, c, ky, kx], columns[tap], total)
+        out[at + x] = total
+
+
+@njit(**_FAST)
+def ordered_conv2(out, columns, conv2) -> None:
+    """out (8 x 19 x 19 + SLACK, flat) = conv2 (stride 2) of the pooled planes split by ``split_columns``
+    (flat), with conv2 (8, 6, 5, 5), in torch's order."""
+    for o in range(OUTS2):
+        for y in range(FULL2):
+            for ky in range(K2):
+                for kx in range(K2):
+                    _conv2_row(out, columns, conv2, o, y, ky, kx, ky == 0 and kx == 0)
+
+
+@njit(**_FAST)
+def pool_and_split(planes, pooled, columns) -> None:
+    """pooled = ``max_pool2(planes)``, and its columns j into columns[c, row, j % 2, j // 2] (6, 41, 2, COLUMNS):
+    conv2's stride-2 taps, contiguous."""
+    max_pool2(planes, pooled)
+    for c in range(pooled.shape[0]):
+        for row in range(pooled.shape[1]):
+            line, even, odd = pooled[c, row], columns[c, row, 0], columns[c, row, 1]
+            for j in range((line.size + 1) // 2):
+                even[j] = line[2 * j]
+            for j in range(line.size // 2):
+                odd[j] = line[2 * j + 1]
+
 
 class ConvFeatures:
     """The 648 features of one observation (``__call__``): the same array, overwritten, at every call.
-    ``fast``: the compiled pass; otherwise torch's convolutions and tanh, pooled (``max_pool2``) into
-    buffers of its own."""
 
-    def __init__(self, conv_weights: np.ndarray, shapes: tuple[tuple[int, ...], ...], fast: bool = False):
+    ``fast``: the compiled pass (opt-in, its own bits). Otherwise torch's bits: through the ordered
+    kernels for RGB frames where ``torch_order_holds()``, else through torch's convolutions;
+    ``ordered`` forces one or the other (the check itself, tests, benchmarks). ``path`` says which runs:
+    "fast", "ordered" or "torch".
+    """
+
+    def __init__(self, conv_weights: np.ndarray, shapes: tuple[tuple[int, ...], ...], fast: bool = False,
+                 ordered: bool | None = None):
         first, second = shapes
         split = int(np.prod(first))
         weights = np.ascontiguousarray(conv_weights, dtype=np.float32)
         conv1, conv2 = weights[:split].reshape(first).copy(), weights[split:].reshape(second).copy()
-        self._forward = self._fast if fast else self._torch_forward
-        pooled1 = np.empty((first[0], SIZE1 // 2, SIZE1 // 2), np.float32)
-        features = np.empty(second[0] * (SIZE2 // 2) ** 2, np.float32)
+        pooled1 = np.empty((first[0], POOLED1, POOLED1), np.float32)
+        self._features = np.empty(second[0] * (SIZE2 // 2) ** 2, np.float32)
+        pooled2 = self._features.reshape(second[0], SIZE2 // 2, SIZE2 // 2)  # conv2's 19 x 19 pools to 9 x 9
         if fast:
+            self.path, self._forward = "fast", self._fast
             self._weights = conv1, conv2
             self._buffers = (np.empty((first[0], SIZE1, SIZE1), np.float32), pooled1,
-                             np.empty((second[0], SIZE2, SIZE2), np.float32), features)
+                             np.empty((second[0], SIZE2, SIZE2), np.float32), self._features)
             return
         import torch
 
         torch.set_num_threads(1)
+        if ordered is None:
+            ordered = first[1] == RGB and torch_order_holds()
+        if ordered:
+            if first[1] != RGB:
+                raise ValueError(f"the ordered kernels take {RGB}-channel frames, not {first[1]}")
+            self.path, self._forward = "ordered", self._ordered
+            self._weights = conv1, conv2
+            # torch's own buffers (64-byte aligned, as its conv2d outputs), so that tanh_ runs on what it would
+            frame, planes1, planes2 = (torch.zeros(int(np.prod(shape)) + SLACK) for shape in
+                                       ((RGB, PIXEL_SIZE, PIXEL_SIZE), (HIDDEN, SIZE1, SIZE1), (OUTS2, FULL2, FULL2)))
+            self._frame, self._planes1, self._planes2 = frame.numpy(), planes1.numpy(), planes2.numpy()
+            self._tensors = planes1[:-SLACK], planes2[:-SLACK]  # what tanh_ overwrites
+            self._inputs = self._frame[:-SLACK].reshape(RGB, PIXEL_SIZE, PIXEL_SIZE)
+            self._columns = np.zeros((HIDDEN, POOLED1, 2, COLUMNS), np.float32)
+            self._pooling = (self._planes1[:-SLACK].reshape(HIDDEN, SIZE1, SIZE1), pooled1,
+                             self._planes2[:-SLACK].reshape(OUTS2, FULL2, FULL2), pooled2)
+            return
+        self.path, self._forward = "torch", self._torch_forward
         self._torch = torch
         self._conv1 = torch.from_numpy(conv1)
         self._conv2 = torch.from_numpy(conv2)
-        self._pooled1, self._features = pooled1, features
-        self._pooled2 = features.reshape(second[0], SIZE2 // 2, SIZE2 // 2)  # conv2's 19 x 19 pools to 9 x 9
+        self._pooled1, self._pooled2 = pooled1, pooled2
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         return self._forward(obs)
@@ -169,3 +295,49 @@ class ConvFeatures:
             max_pool2(conv2d(torch.from_numpy(self._pooled1)[None], self._conv2, stride=2).tanh_()[0].numpy(),
                       self._pooled2)
             return self._features
+
+    def _ordered(self, obs: np.ndarray) -> np.ndarray:
+        np.copyto(self._inputs, obs, casting="unsafe")  # np.ascontiguousarray(obs, dtype=np.float32)'s values
+        (conv1, conv2), (tanh1, tanh2) = self._weights, self._tensors
+        planes1, pooled1, planes2, pooled2 = self._pooling
+        ordered_conv1(self._planes1, self._frame, conv1)
+        tanh1.tanh_()
+        pool_and_split(planes1, pooled1, self._columns)
+        ordered_conv2(self._planes2, self._columns.reshape(-1), conv2)
+        tanh2.tanh_()
+        max_pool2(planes2, pooled2)
+        return self._features
+
+
+@functools.cache
+def torch_order_holds() -> bool:
+    """Whether the ordered kernels give torch's ``conv2d`` bits on this machine: checked once per process
+    on random frames and weights, large weights, and a black frame under negative weights (the sign
+    of a zero sum), each convolution's outputs and the features compared bit for bit. A different
+    summation order, or multiply-adds rounded twice, changes the low bits of most outputs."""
+    import torch
+
+    rng = np.random.default_rng(0)
+    sizes = [int(np.prod(shape)) for shape in conv_shapes(RGB)]
+    frames = [rng.random((RGB, PIXEL_SIZE, PIXEL_SIZE), dtype=np.float32) for _ in range(2)]
+    frames.append(np.zeros((RGB, PIXEL_SIZE, PIXEL_SIZE), np.float32))
+    weights = [rng.standard_normal(sum(sizes), dtype=np.float32) for _ in range(3)]
+    weights[1], weights[2] = 30 * weights[1], -np.abs(weights[2])  # large sums; every product of a black pixel -0
+    for frame, vector in zip(frames, weights):
+        ordered = ConvFeatures(vector, conv_shapes(RGB), ordered=True)
+        reference = ConvFeatures(vector, conv_shapes(RGB), ordered=False)
+        if not _same_bits(ordered(frame), reference(frame)):
+            return False
+        (conv1, conv2), (planes1, pooled1, planes2, _) = ordered._weights, ordered._pooling
+        ordered_conv1(ordered._planes1, ordered._frame, conv1)  # the raw sums, before tanh_
+        ordered_conv2(ordered._planes2, ordered._columns.reshape(-1), conv2)  # from the pooled planes above
+        with torch.inference_mode():
+            sums1 = torch.nn.functional.conv2d(torch.from_numpy(frame)[None], torch.from_numpy(conv1))[0]
+            sums2 = torch.nn.functional.conv2d(torch.from_numpy(pooled1)[None], torch.from_numpy(conv2), stride=2)[0]
+        if not (_same_bits(planes1, sums1.numpy()) and _same_bits(planes2, sums2.numpy())):
+            return False
+    return True
+
+
+def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
+    return a.shape == b.shape and np.array_equal(a.view(np.uint32), b.view(np.uint32))
