@@ -25,7 +25,7 @@ on both alike; the medians over rounds are printed.
   steps) on 2 and 16 workers from the capped Hebbian loop's cost per step, as
   ``experiments/step_cost.py`` does: (popsize + 1) x 1000 x step / workers per generation;
 - ``--fast_conv``: the capped Hebbian loop again, the fast class's network with ``--fast_conv``
-  (``policies.conv``: not bit for bit; docs/speed-carracing.md) against the stock class's with torch,
+  (``policies.conv``: not bit for bit; docs/speed-carracing.md) against the stock class's with the default CNN,
   and its projection;
 - ``--memory``: ``train_hebb.py`` at the paper's population (200) with 2 workers for one
   generation, its processes' summed PSS and USS (``/proc/PID/smaps_rollup``) sampled while it runs;
@@ -64,6 +64,7 @@ from envs.wrappers import CarRacingAction, PixelObservation
 from es.backends import Generation, SerialEvaluator
 from es.noise import NoiseTable
 from policies import PolicySettings
+from policies.conv import torch_order_holds
 
 FAST_ID = "CarRacing-v3"
 ENV_TARGET, RESET_TARGET, LOOP_TARGET = 8.0, 2.5, 5.0
@@ -203,7 +204,7 @@ def _pixel_chain(problem):
 def capped_loop_rates(kind: str, rounds: int, episodes: int, length: int,
                       fast_conv: bool = False) -> tuple[list[float], list[float]]:
     """Steps per CPU second of the capped training loop with each class, per round (resets counted);
-    ``fast_conv``: the fast class's network with ``--fast_conv`` (the stock class's with torch)."""
+    ``fast_conv``: the fast class's network with ``--fast_conv`` (the stock class's with the default CNN)."""
     problems = [ProblemSpec((STOCK_ID,), PolicySettings(kind)).build(),
                 ProblemSpec((FAST_ID,), PolicySettings(kind, fast_conv=fast_conv)).build()]
     params = problems[0].policy.initial_params(np.random.default_rng(0))
@@ -468,8 +469,10 @@ def main() -> int:
     if args.fast_conv:
         stock, fast = capped_loop_rates("hebbian", args.rounds, args.episodes, args.length, fast_conv=True)
         summary(f"training loop, episodes capped at {args.length} steps, hebbian, the fast class with --fast_conv "
-                "against the stock class with torch", stock, fast, LOOP_TARGET)
+                "against the stock class with the default CNN", stock, fast, LOOP_TARGET)
         projection((1 / statistics.median(stock), 1 / statistics.median(fast)), " with --fast_conv")
+    print("the default CNN, in every loop above: " + ("torch's bits through the ordered kernels (policies.conv)"
+                                                       if torch_order_holds() else "torch's path"))
     for kind in ("static", "hebbian"):
         parts = policy_share(kind, args.share_steps)
         total = sum(parts.values())

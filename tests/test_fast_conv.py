@@ -2,7 +2,7 @@
 against the equations written out, its determinism, the flag's declaration end to end (train, config.json,
 evaluate, refusals), and run folders written before the flag.
 
-The default path stays torch's, bit for bit: tests/test_pinned.py's pixel cases pin it.
+The default path keeps torch's bits: tests/test_pinned.py's pixel cases pin it (tests/test_ordered_conv.py: how).
 """
 
 from __future__ import annotations

@@ -211,8 +211,9 @@ def test_max_pool2_is_torchs_max_pool2d_bit_for_bit(shape):
 
 @pytest.mark.parametrize("channels", [3, 4])
 def test_default_cnn_features_are_torchs_layers_bit_for_bit(channels):
-    """The default front end (policies/conv.py, torch's path pooled into its own buffers) gives the
-    bits of torch's own layers, and overwrites one array at every call."""
+    """The default front end (policies/conv.py: for RGB frames the ordered kernels, where they give torch's
+    bits, else torch's path pooled into its own buffers) gives the bits of torch's own layers, and
+    overwrites one array at every call."""
     from policies.conv import ConvFeatures
     from policies.network import conv_shapes
 
