@@ -207,7 +207,7 @@ def _conv2_row(out, columns, conv2, o, y, ky, kx, first):
 
 @njit(**_FAST)
 def ordered_conv2(out, columns, conv2) -> None:
-    """out (8 x 19 x 19 + SLACK, flat) = conv2 (stride 2) of the pooled planes split by ``split_columns``
+    """out (8 x 19 x 19 + SLACK, flat) = conv2 (stride 2) of the pooled planes split by ``pool_and_split``
     (flat), with conv2 (8, 6, 5, 5), in torch's order."""
     for o in range(OUTS2):
         for y in range(FULL2):
@@ -271,6 +271,7 @@ class ConvFeatures:
             self._tensors = planes1[:-SLACK], planes2[:-SLACK]  # what tanh_ overwrites
             self._inputs = self._frame[:-SLACK].reshape(RGB, PIXEL_SIZE, PIXEL_SIZE)
             self._columns = np.zeros((HIDDEN, POOLED1, 2, COLUMNS), np.float32)
+            self._columns_flat = self._columns.reshape(-1)  # the same floats, as ordered_conv2 reads them
             self._pooling = (self._planes1[:-SLACK].reshape(HIDDEN, SIZE1, SIZE1), pooled1,
                              self._planes2[:-SLACK].reshape(OUTS2, FULL2, FULL2), pooled2)
             return
@@ -303,7 +304,7 @@ class ConvFeatures:
         ordered_conv1(self._planes1, self._frame, conv1)
         tanh1.tanh_()
         pool_and_split(planes1, pooled1, self._columns)
-        ordered_conv2(self._planes2, self._columns.reshape(-1), conv2)
+        ordered_conv2(self._planes2, self._columns_flat, conv2)
         tanh2.tanh_()
         max_pool2(planes2, pooled2)
         return self._features
@@ -330,7 +331,7 @@ def torch_order_holds() -> bool:
             return False
         (conv1, conv2), (planes1, pooled1, planes2, _) = ordered._weights, ordered._pooling
         ordered_conv1(ordered._planes1, ordered._frame, conv1)  # the raw sums, before tanh_
-        ordered_conv2(ordered._planes2, ordered._columns.reshape(-1), conv2)  # from the pooled planes above
+        ordered_conv2(ordered._planes2, ordered._columns_flat, conv2)  # from the pooled planes above
         with torch.inference_mode():
             sums1 = torch.nn.functional.conv2d(torch.from_numpy(frame)[None], torch.from_numpy(conv1))[0]
             sums2 = torch.nn.functional.conv2d(torch.from_numpy(pooled1)[None], torch.from_numpy(conv2), stride=2)[0]
