@@ -351,19 +351,21 @@ class SpanObservation:
                       np.full(2 * _RECENT, -1, dtype=np.int64), int(whole.min()) if len(whole) else 0)
         self._work[4][0] = 0
         self._cover = np.empty((3, height), dtype=np.int64)  # record_polygons' scratch: one polygon's fill
+        self._most = 0  # the most records in a row of the span list, as the last record_polygons left it
 
     def target(self) -> tuple:
         """An empty span list for ``envs.pygame_raster``'s drawing functions."""
         self.counts[:] = 0
+        self._most = 0
         return (self.records, self.counts, self.size[1], self.size[0])
 
     def record_polygons(self, target: tuple, flip: bool, *polygons) -> None:
         """``pygame_raster.draw_polygons``'s arguments after the target and flip."""
-        record_polygons(target, flip, *polygons, self._cover)
+        self._most = record_polygons(target, flip, *polygons, self._cover)
 
     def overflowed(self) -> bool:
         """True (and the list grown) if the last drawing recorded more spans in a row than it could keep."""
-        most = int(self.counts.max())
+        most = self._most
         if most <= self.records.shape[1]:
             return False
         self.records = np.empty((self.size[1], 2 * most), dtype=np.int64)
@@ -385,19 +387,22 @@ def record_polygons(spans, flip, xs, ys, starts, colors, antialiased, cover):
     x1 and x2 and how many spans; ``pygame_raster``'s cover target); where it has at most one span
     per row, those spans are the cover behind which the edge is drawn, which leaves those pixels
     out, and then they are recorded. Otherwise the edge and the fill are recorded in order, and the
-    hidden pixels removed (``_drop_covered``).
+    hidden pixels removed (``_drop_covered``). A row whose last record is then an opaque span over
+    the whole width keeps only that one (``_keep_whole_rows``). Returns the most records in a row
+    of the list (more than it holds: it overflowed).
     """
     records, counts, height, width = spans
     for k in range(colors.shape[0]):
         polygon_xs, polygon_ys = xs[starts[k]:starts[k + 1]], ys[starts[k]:starts[k + 1]]
-        if not antialiased[k]:
-            draw_polygon(spans, flip, polygon_xs, polygon_ys, colors[k])
-            continue
         low, high = max(polygon_ys.min() - 1, 0), min(polygon_ys.max() + 1, height - 1)  # the edge's rows
-        if low > high:
-            continue
         if flip:  # the rows of the records
             low, high = height - 1 - high, height - 1 - low
+        if not antialiased[k]:
+            draw_polygon(spans, flip, polygon_xs, polygon_ys, colors[k])
+            _keep_whole_rows(records, counts, low, high, width)
+            continue
+        if low > high:
+            continue
         cover[2, low:high + 1] = 0
         gfx_filled_polygon((cover, height, width), flip, polygon_xs, polygon_ys, colors[k])
         if cover[2, low:high + 1].max() <= 1:
@@ -408,6 +413,7 @@ def record_polygons(spans, flip, xs, ys, starts, colors, antialiased, cover):
             for row in range(low, high + 1):
                 if cover[2, row]:
                     append(records, counts, row, span_record(cover[0, row], cover[1, row], colors[k], 255))
+            _keep_whole_rows(records, counts, low, high, width)
             continue
         before, between = cover[0], cover[1]  # (the cover's rows, unused on this path, as scratch)
         before[low:high + 1] = counts[low:high + 1]
@@ -416,6 +422,22 @@ def record_polygons(spans, flip, xs, ys, starts, colors, antialiased, cover):
         gfx_filled_polygon(spans, flip, polygon_xs, polygon_ys, colors[k])
         for row in range(low, high + 1):
             _drop_covered(records, counts, row, before[row], between[row])
+        _keep_whole_rows(records, counts, low, high, width)
+    return counts.max()
+
+
+@njit(**_FLAGS)
+def _keep_whole_rows(records, counts, low, high, width):
+    """Rows low..high whose last record is an opaque span over the whole width keep only that
+    record: it hides everything recorded before it in its row. (The dashboard's black bar hides the
+    world in the picture's last 100 rows: they then hold the bar and the indicators, and most of
+    them are the row above, which ``observe`` does not compute again.)"""
+    whole = span_record(0, width - 1, 0, 255) & ((1 << 28) - 1)  # x1, x2 and alpha, any colour
+    for row in range(low, high + 1):
+        last = counts[row] - 1
+        if 0 < last < records.shape[1] and records[row, last] & ((1 << 28) - 1) == whole:
+            records[row, 0] = records[row, last]
+            counts[row] = 1
 
 
 @njit(**_FLAGS)

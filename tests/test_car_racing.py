@@ -390,7 +390,10 @@ def test_recorded_spans_are_the_drawing_less_the_edges_its_own_fill_hides():
         mask = (1 << pygame_raster.SPAN_BITS) - 1
         return record & mask, (record >> pygame_raster.SPAN_BITS) & mask
 
-    several = 0
+    def alpha(record: int) -> int:
+        return (record >> 20) & 0xFF
+
+    several = whole = 0
     for trial in range(40):
         polygons = [random_polygon(rng, width, height) for _ in range(int(rng.integers(1, 12)))]
         colors = rng.integers(0, 1 << 24, size=len(polygons))
@@ -405,15 +408,19 @@ def test_recorded_spans_are_the_drawing_less_the_edges_its_own_fill_hides():
             if not smooth[k]:
                 for row, records in enumerate(drawn(pygame_raster.draw_polygon, flip, *corners_k, color)):
                     expected[row] += records
-                continue
-            edges = drawn(pygame_raster.gfx_aapolygon, flip, *corners_k, color)
-            fills = drawn(pygame_raster.gfx_filled_polygon, flip, *corners_k, color)
-            for row in range(height):
-                inside = [ends(record) for record in fills[row]]
-                several += len(inside) > 1 and len(edges[row]) > 0
-                expected[row] += [record for record in edges[row]
-                                  if not any(a <= ends(record)[0] and ends(record)[1] <= b for a, b in inside)]
-                expected[row] += fills[row]
+            else:
+                edges = drawn(pygame_raster.gfx_aapolygon, flip, *corners_k, color)
+                fills = drawn(pygame_raster.gfx_filled_polygon, flip, *corners_k, color)
+                for row in range(height):
+                    inside = [ends(record) for record in fills[row]]
+                    several += len(inside) > 1 and len(edges[row]) > 0
+                    expected[row] += [record for record in edges[row]
+                                      if not any(a <= ends(record)[0] and ends(record)[1] <= b for a, b in inside)]
+                    expected[row] += fills[row]
+            for row in range(height):  # an opaque span over the whole row, last, hides what came before it
+                if expected[row] and ends(expected[row][-1]) == (0, width - 1) and alpha(expected[row][-1]) == 255:
+                    whole += len(expected[row]) > 1
+                    expected[row] = expected[row][-1:]
         while True:
             spans.record_polygons(spans.target(), flip, xs, ys, starts, colors, smooth)
             if not spans.overflowed():
@@ -421,6 +428,7 @@ def test_recorded_spans_are_the_drawing_less_the_edges_its_own_fill_hides():
         got = [spans.records[row, :spans.counts[row]].tolist() for row in range(height)]
         assert got == expected, trial
     assert several > 0  # rows of several fill spans (non-convex polygons) were met
+    assert whole > 0  # rows hidden by a span over the whole row were met
 
 
 def expected_surface_pixel(color) -> int:
