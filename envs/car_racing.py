@@ -441,6 +441,91 @@ def _playfield_corners() -> np.ndarray:
     return np.array([(bound, bound), (bound, -bound), (-bound, -bound), (-bound, bound)], dtype=np.float64)
 
 
+_DOUBLES = (float, np.float64)  # what CarRacing.step hands the car's controls (it casts an action to float64)
+
+
+def _sign(x: float) -> float:
+    """``np.sign`` of a double: 1.0, -1.0, 0.0 for either zero, NaN as it is."""
+    return 1.0 if x > 0 else -1.0 if x < 0 else 0.0 if x == 0 else x
+
+
+class _Car(car_dynamics.Car):
+    """Gymnasium's ``Car`` whose ``gas`` and ``step`` run its arithmetic without numpy's scalar
+    functions, which cost most of its time: ``np.clip``, ``np.sign``, ``np.square`` and ``np.sqrt``
+    of a double are comparisons, a product and IEEE's square root, so the same double operations
+    in the same order give the same doubles (as Python floats where the stock has numpy's float64).
+    Any control that is not a double (the car's methods called from outside) takes the stock
+    methods. ``FastCarRacing.step`` gives the car Gymnasium's reset makes this class."""
+
+    def gas(self, gas):
+        if type(gas) not in _DOUBLES:
+            return super().gas(gas)
+        gas = 0.0 if gas < 0 else 1.0 if gas > 1 else gas  # np.clip(gas, 0, 1): -0.0 and NaN as they are
+        for w in self.wheels[2:4]:
+            diff = gas - w.gas
+            if diff > 0.1:
+                diff = 0.1  # gradually increase, but stop immediately
+            w.gas += diff
+
+    def step(self, dt):
+        wheels = self.wheels
+        if not all(type(value) in _DOUBLES for w in wheels for value in (w.steer, w.gas, w.brake, w.omega)):
+            return super().step(dt)
+        friction, power, inertia = car_dynamics.FRICTION_LIMIT, car_dynamics.ENGINE_POWER, \
+            car_dynamics.WHEEL_MOMENT_OF_INERTIA
+        scale = 205000 * car_dynamics.SIZE * car_dynamics.SIZE
+        for w in wheels:
+            joint = w.joint
+            turn = w.steer - joint.angle  # (the stock reads the angle twice: the same float)
+            joint.motorSpeed = _sign(turn) * min(50.0 * abs(turn), 3.0)
+            grass = True
+            friction_limit = friction * 0.6  # grass, unless on a tile
+            for tile in w.tiles:
+                friction_limit = max(friction_limit, friction * tile.road_friction)
+                grass = False
+            forw = w.GetWorldVector((0, 1))
+            side = w.GetWorldVector((1, 0))
+            v = w.linearVelocity
+            vf = forw[0] * v[0] + forw[1] * v[1]  # forward speed
+            vs = side[0] * v[0] + side[1] * v[1]  # side speed
+            w.omega += dt * power * w.gas / inertia / (abs(w.omega) + 5.0)
+            self.fuel_spent += dt * power * w.gas
+            if w.brake >= 0.9:
+                w.omega = 0
+            elif w.brake > 0:
+                direction = -_sign(w.omega)
+                val = 15 * w.brake  # BRAKE_FORCE, radians per second
+                if abs(val) > abs(w.omega):
+                    val = abs(w.omega)  # low speed => same as = 0
+                w.omega += direction * val
+            w.phase += w.omega * dt
+            vr = w.omega * w.wheel_rad  # rotating wheel speed
+            f_force = -vf + vr
+            p_force = -vs
+            f_force *= scale
+            p_force *= scale
+            force = math.sqrt(f_force * f_force + p_force * p_force)
+            if abs(force) > 2.0 * friction_limit:  # skid trace
+                if w.skid_particle and w.skid_particle.grass == grass and len(w.skid_particle.poly) < 30:
+                    w.skid_particle.poly.append((w.position[0], w.position[1]))
+                elif w.skid_start is None:
+                    w.skid_start = w.position
+                else:
+                    w.skid_particle = self._create_particle(w.skid_start, w.position, grass)
+                    w.skid_start = None
+            else:
+                w.skid_start = None
+                w.skid_particle = None
+            if abs(force) > friction_limit:
+                f_force /= force
+                p_force /= force
+                force = friction_limit
+                f_force *= force
+                p_force *= force
+            w.omega -= dt * f_force * w.wheel_rad / inertia
+            w.ApplyForceToCenter((p_force * side[0] + f_force * forw[0], p_force * side[1] + f_force * forw[1]), True)
+
+
 class FastCarRacing(stock.CarRacing):
     """Gymnasium's CarRacing with the same observations and frames, drawn with less work.
 
@@ -472,6 +557,11 @@ class FastCarRacing(stock.CarRacing):
         self._grass_corners = _grass_corners()
         self._playfield = _playfield_corners()
         self._tile_body = car_racing_track.static_body_def()
+
+    def step(self, action):
+        if type(self.car) is car_dynamics.Car:  # the car Gymnasium's reset made: the same, with less numpy
+            self.car.__class__ = _Car
+        return super().step(action)
 
     def _create_track(self) -> bool:
         """The stock track, ``road_poly`` and tile bodies, generated in numba (``envs.car_racing_track``)."""

@@ -191,6 +191,53 @@ def test_domain_randomisation_and_discrete_actions():
     assert_same_episode(19, rng.integers(0, 5, size=50).tolist(), continuous=False)
 
 
+def car_record(car) -> list:
+    """Every number the car's methods write, as bits (the sign of zero and NaN included), and its bodies' poses."""
+    def bits(value) -> int:
+        return int(np.float64(value).view(np.int64))
+    numbers = [bits(car.fuel_spent)]
+    for wheel in car.wheels:
+        numbers += [bits(getattr(wheel, name)) for name in ("gas", "brake", "steer", "omega", "phase")]
+        numbers += [bits(wheel.joint.motorSpeed), wheel.skid_start is None, len(wheel.tiles)]
+    return numbers + [tuple(body.position) + (body.angle,) for body in car.drawlist] + [len(car.particles)]
+
+
+def test_the_cars_arithmetic_without_numpy_is_gymnasiums():
+    """``FastCarRacing``'s car (``car_racing._Car``) writes the bits Gymnasium's ``Car`` writes, step by
+    step, under controls at and beyond their bounds: gas below 0, -0.0, above 1 and NaN (``np.clip``),
+    braking hard and gently (``np.sign``, the wheels' omega set to 0), steering past the joint's
+    limits, on the road and the grass, skidding; and its ``gas`` and ``step`` take the stock methods
+    for controls that are not doubles."""
+    assert [car_racing._sign(x) for x in (2.0, -3.0, 0.0, -0.0, math.inf, -math.inf)] == [1.0, -1.0, 0.0, 0.0, 1.0,
+                                                                                       -1.0]
+    assert math.copysign(1, car_racing._sign(-0.0)) == 1 and math.isnan(car_racing._sign(math.nan))
+    stock, fast = pair()
+    stock.reset(seed=11)
+    fast.reset(seed=11)
+    assert type(fast.unwrapped.car) is car_racing._Car
+    rng = np.random.default_rng(5)
+    controls = [(0.0, 1.0, 0.0)] * 30 + [(1.0, 1.0, 0.0)] * 40 + [(-0.7, 0.5, 0.3)] * 10 + [(0.3, 0.0, 0.95)] * 5
+    controls += [tuple(rng.uniform(-1.5, 1.5, 3)) for _ in range(120)] + [(0.0, -0.0, 0.0), (-1.0, 2.0, -0.5)] * 5
+    for step, control in enumerate(controls):
+        action = np.array(control, dtype=np.float32)
+        expected, got = stock.step(action), fast.step(action)
+        assert np.array_equal(expected[0], got[0]) and expected[1:] == got[1:], step
+        assert car_record(stock.unwrapped.car) == car_record(fast.unwrapped.car), step
+    assert any(wheel.skid_particle is not None for wheel in fast.unwrapped.car.wheels) or fast.unwrapped.car.particles
+    stock_car, fast_car = stock.unwrapped.car, fast.unwrapped.car
+    for gas in (math.nan, 0.5, -0.0, 3.0, np.float32(0.25), 1):  # the gas itself (NaN would stop the physics)
+        type(stock_car).gas(stock_car, gas)
+        fast_car.gas(gas)
+        assert car_record(stock_car) == car_record(fast_car), gas
+    fast_car.wheels[0].steer = 0  # a control that is not a double: the stock step
+    stock_car.wheels[0].steer = 0
+    for wheel in (*stock_car.wheels, *fast_car.wheels):
+        wheel.gas = 0.5 if math.isnan(wheel.gas) else wheel.gas
+    type(stock_car).step(stock_car, 1 / 50)
+    fast_car.step(1 / 50)
+    assert car_record(stock_car) == car_record(fast_car)
+
+
 def tile_record(tile) -> tuple:
     """What the contact listener and the drawing read from a tile body, and its fixture's shape."""
     fixture = tile.fixtures[0]
