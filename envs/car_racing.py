@@ -5,7 +5,10 @@ picture at every step, because the observation is that picture. Most of its time
 ``_render_road``: about 800 road and grass polygons are rotated vertex by vertex with
 ``pygame.math.Vector2.rotate_rad``, tested for visibility in Python, and about 60 of them drawn.
 ``FastCarRacing`` keeps the physics, the track generation and their random-number use (it does not
-touch them) and computes the same picture with less work:
+touch them: the car's arithmetic below is its own, in its order) and computes the same picture with less work:
+
+- the car's ``gas`` and ``step`` run ``Car``'s arithmetic without numpy's scalar functions
+  (``_Car``, the same double operations in the same order; issue 21);
 
 - the polygons are transformed in numpy with pygame's own arithmetic (``rotate_like_pygame``), so
   every vertex is the same double as pygame's, and culled with the same inclusive bounds; those
