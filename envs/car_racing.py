@@ -4,8 +4,8 @@ Gymnasium's ``CarRacing`` (O. Klimov; ``gymnasium/envs/box2d/car_racing.py``, v3
 picture at every step, because the observation is that picture. Most of its time goes to
 ``_render_road``: about 800 road and grass polygons are rotated vertex by vertex with
 ``pygame.math.Vector2.rotate_rad``, tested for visibility in Python, and about 60 of them drawn.
-``FastCarRacing`` keeps the physics, the track generation and their random-number use (it does not
-touch them: the car's arithmetic below is its own, in its order) and computes the same picture with less work:
+``FastCarRacing`` keeps the physics, the track generation and their random-number use (it changes
+none of their numbers) and computes the same picture with less work:
 
 - the car's ``gas`` and ``step`` run ``Car``'s arithmetic without numpy's scalar functions
   (``_Car``, the same double operations in the same order; issue 21);
