@@ -9,7 +9,6 @@ none of their numbers) and computes the same picture with less work:
 
 - the car's ``gas`` and ``step`` run ``Car``'s arithmetic without numpy's scalar functions
   (``_Car``, the same double operations in the same order; issue 21);
-
 - the polygons are transformed in numpy with pygame's own arithmetic (``rotate_like_pygame``), so
   every vertex is the same double as pygame's, and culled with the same inclusive bounds; those
   that pass that generous test but lie wholly beyond one side of the screen are not drawn (pygame

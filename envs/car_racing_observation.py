@@ -351,21 +351,19 @@ class SpanObservation:
                       np.full(2 * _RECENT, -1, dtype=np.int64), int(whole.min()) if len(whole) else 0)
         self._work[4][0] = 0
         self._cover = np.empty((3, height), dtype=np.int64)  # record_polygons' scratch: one polygon's fill
-        self._most = 0  # the most records in a row of the span list, as the last record_polygons left it
 
     def target(self) -> tuple:
         """An empty span list for ``envs.pygame_raster``'s drawing functions."""
         self.counts[:] = 0
-        self._most = 0
         return (self.records, self.counts, self.size[1], self.size[0])
 
     def record_polygons(self, target: tuple, flip: bool, *polygons) -> None:
         """``pygame_raster.draw_polygons``'s arguments after the target and flip."""
-        self._most = record_polygons(target, flip, *polygons, self._cover)
+        record_polygons(target, flip, *polygons, self._cover)
 
     def overflowed(self) -> bool:
         """True (and the list grown) if the last drawing recorded more spans in a row than it could keep."""
-        most = self._most
+        most = _fullest(self.counts)
         if most <= self.records.shape[1]:
             return False
         self.records = np.empty((self.size[1], 2 * most), dtype=np.int64)
@@ -379,6 +377,13 @@ class SpanObservation:
 
 
 @njit(**_FLAGS)
+def _fullest(counts) -> int:
+    """``counts.max()``: compiled, it costs a few microseconds inside the training loop, where numpy's
+    reduction of 800 integers cost 25."""
+    return counts.max()
+
+
+@njit(**_FLAGS)
 def record_polygons(spans, flip, xs, ys, starts, colors, antialiased, cover):
     """``pygame_raster.draw_polygons`` into a span list, less what cannot show.
 
@@ -388,8 +393,7 @@ def record_polygons(spans, flip, xs, ys, starts, colors, antialiased, cover):
     per row, those spans are the cover behind which the edge is drawn, which leaves those pixels
     out, and then they are recorded. Otherwise the edge and the fill are recorded in order, and the
     hidden pixels removed (``_drop_covered``). A row whose last record is then an opaque span over
-    the whole width keeps only that one (``_keep_whole_rows``). Returns the most records in a row
-    of the list (more than it holds: it overflowed).
+    the whole width keeps only that one (``_keep_whole_rows``).
     """
     records, counts, height, width = spans
     for k in range(colors.shape[0]):
@@ -399,31 +403,33 @@ def record_polygons(spans, flip, xs, ys, starts, colors, antialiased, cover):
             low, high = height - 1 - high, height - 1 - low
         if not antialiased[k]:
             draw_polygon(spans, flip, polygon_xs, polygon_ys, colors[k])
-            _keep_whole_rows(records, counts, low, high, width)
-            continue
-        if low > high:
-            continue
-        cover[2, low:high + 1] = 0
-        gfx_filled_polygon((cover, height, width), flip, polygon_xs, polygon_ys, colors[k])
-        if cover[2, low:high + 1].max() <= 1:
-            for row in range(low, high + 1):
-                if cover[2, row] == 0:  # (an empty row covers nothing)
-                    cover[0, row], cover[1, row] = width, -1
-            gfx_aapolygon((records, counts, height, width, cover), flip, polygon_xs, polygon_ys, colors[k])
-            for row in range(low, high + 1):
-                if cover[2, row]:
-                    append(records, counts, row, span_record(cover[0, row], cover[1, row], colors[k], 255))
-            _keep_whole_rows(records, counts, low, high, width)
-            continue
-        before, between = cover[0], cover[1]  # (the cover's rows, unused on this path, as scratch)
-        before[low:high + 1] = counts[low:high + 1]
-        gfx_aapolygon(spans, flip, polygon_xs, polygon_ys, colors[k])
-        between[low:high + 1] = counts[low:high + 1]
-        gfx_filled_polygon(spans, flip, polygon_xs, polygon_ys, colors[k])
-        for row in range(low, high + 1):
-            _drop_covered(records, counts, row, before[row], between[row])
+        elif low <= high:
+            _record_antialiased(spans, flip, polygon_xs, polygon_ys, colors[k], low, high, cover)
         _keep_whole_rows(records, counts, low, high, width)
-    return counts.max()
+
+
+@njit(inline="always", **_FLAGS)
+def _record_antialiased(spans, flip, xs, ys, color, low, high, cover):
+    """One anti-aliased polygon whose edge touches rows low..high of the records (``record_polygons``)."""
+    records, counts, height, width = spans
+    cover[2, low:high + 1] = 0
+    gfx_filled_polygon((cover, height, width), flip, xs, ys, color)
+    if cover[2, low:high + 1].max() <= 1:
+        for row in range(low, high + 1):
+            if cover[2, row] == 0:  # (an empty row covers nothing)
+                cover[0, row], cover[1, row] = width, -1
+        gfx_aapolygon((records, counts, height, width, cover), flip, xs, ys, color)
+        for row in range(low, high + 1):
+            if cover[2, row]:
+                append(records, counts, row, span_record(cover[0, row], cover[1, row], color, 255))
+        return
+    before, between = cover[0], cover[1]  # (the cover's rows, unused on this path, as scratch)
+    before[low:high + 1] = counts[low:high + 1]
+    gfx_aapolygon(spans, flip, xs, ys, color)
+    between[low:high + 1] = counts[low:high + 1]
+    gfx_filled_polygon(spans, flip, xs, ys, color)
+    for row in range(low, high + 1):
+        _drop_covered(records, counts, row, before[row], between[row])
 
 
 @njit(**_FLAGS)
@@ -432,12 +438,13 @@ def _keep_whole_rows(records, counts, low, high, width):
     record: it hides everything recorded before it in its row. (The dashboard's black bar hides the
     world in the picture's last 100 rows: they then hold the bar and the indicators, and most of
     them are the row above, which ``observe`` does not compute again.)"""
-    whole = span_record(0, width - 1, 0, 255) & ((1 << 28) - 1)  # x1, x2 and alpha, any colour
     for row in range(low, high + 1):
         last = counts[row] - 1
-        if 0 < last < records.shape[1] and records[row, last] & ((1 << 28) - 1) == whole:
-            records[row, 0] = records[row, last]
-            counts[row] = 1
+        if 0 < last < records.shape[1]:
+            x1, x2, _, alpha = _unpack(records[row, last])
+            if x1 == 0 and x2 == width - 1 and alpha == 255:
+                records[row, 0] = records[row, last]
+                counts[row] = 1
 
 
 @njit(**_FLAGS)
