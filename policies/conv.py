@@ -9,11 +9,11 @@ Its weights are evolved and never plastic. Three implementations compute it from
   imported only when it is built, so state-vector runs never pay for it.
 - the default for RGB frames where it gives torch's bits (``torch_order_holds``, checked once per
   process): the same function with each convolution compiled (``ordered_conv1``, ``ordered_conv2``)
-  and summed in the order of torch's own kernel, and torch's ``tanh_`` applied in place to the
-  same (C, H, W) planes torch's convolutions would return: about 1.8x faster than torch's path on
-  one frame (0.37-0.43 against 0.68-0.77 ms here; torch's tanh is now most of it). Where the check
-  fails (another CPU, whose oneDNN kernel sums in another order, or has no FMA), and for other
-  channel counts, torch's path runs. The check costs about 0.5 s, once per process.
+  and summed in the order of torch's own kernel, each pooled before torch's ``tanh_`` (below):
+  about 2.5x faster than torch's path on one frame (docs/speed-carracing.md). Where the check fails
+  (another CPU, whose oneDNN kernel sums in another order, or has no FMA, or a torch whose tanh
+  is not non-decreasing), and for other channel counts, torch's path runs. The check costs about
+  0.5 s, once per process.
 - ``--fast_conv`` (``fast_features``): one compiled pass over preallocated buffers, about 4x faster than
   torch's path on one frame (docs/speed-carracing.md). It differs from torch in the low bits (features
   within about 1e-5): its own summation order, and the dense head's rational tanh
@@ -36,6 +36,15 @@ whole vectors wide (88 of 82 pixels, 24 of 19): what lies past a row's end spill
 row, which is computed after it, and the buffers end in ``SLACK`` spare floats. (Where two NaNs with
 different payloads meet in one multiply-add, which payload comes out may differ from torch's; a NaN
 stays a NaN.)
+
+Pooling before tanh. A window's ``max_pool2`` of the tanh is the tanh of its ``max_pool2`` wherever
+torch's tanh is non-decreasing, is zero only at zero and keeps a zero's sign: the first of the
+window's equal maxima is then the first of its equal tanhs, and a NaN stays the last NaN. So the
+ordered path pools each convolution's sums and applies torch's ``tanh_`` to the pooled planes, a
+quarter of the values (torch's tanh, MKL's ``vsTanh``, had been most of the path's time). MKL's
+kernel on this machine was checked over every float32: non-decreasing, odd, the identity on
+subnormals, NaN for NaN. ``torch_order_holds`` checks those properties on a dense sample
+(``_tanh_pools_first``) in each process.
 
 The compiled pass takes each window's maximum before its tanh: tanh is non-decreasing, so
 tanh(max x) = max tanh(x), with a quarter of the tanh calls (the rational tanh steps down by one ulp
@@ -207,7 +216,7 @@ def _conv2_row(out, columns, conv2, o, y, ky, kx, first):
 
 @njit(**_FAST)
 def ordered_conv2(out, columns, conv2) -> None:
-    """out (8 x 19 x 19 + SLACK, flat) = conv2 (stride 2) of the pooled planes split by ``pool_and_split``
+    """out (8 x 19 x 19 + SLACK, flat) = conv2 (stride 2) of the pooled planes split by ``split_columns``
     (flat), with conv2 (8, 6, 5, 5), in torch's order."""
     for o in range(OUTS2):
         for y in range(FULL2):
@@ -217,10 +226,9 @@ def ordered_conv2(out, columns, conv2) -> None:
 
 
 @njit(**_FAST)
-def pool_and_split(planes, pooled, columns) -> None:
-    """pooled = ``max_pool2(planes)``, and its columns j into columns[c, row, j % 2, j // 2] (6, 41, 2, COLUMNS):
-    conv2's stride-2 taps, contiguous."""
-    max_pool2(planes, pooled)
+def split_columns(pooled, columns) -> None:
+    """The pooled planes' columns j into columns[c, row, j % 2, j // 2] (6, 41, 2, COLUMNS): conv2's stride-2
+    taps, contiguous."""
     for c in range(pooled.shape[0]):
         for row in range(pooled.shape[1]):
             line, even, odd = pooled[c, row], columns[c, row, 0], columns[c, row, 1]
@@ -264,11 +272,10 @@ class ConvFeatures:
                 raise ValueError(f"the ordered kernels take {RGB}-channel frames, not {first[1]}")
             self.path, self._forward = "ordered", self._ordered
             self._weights = conv1, conv2
-            # torch's own buffers (64-byte aligned, as its conv2d outputs), so that tanh_ runs on what it would
-            frame, planes1, planes2 = (torch.zeros(int(np.prod(shape)) + SLACK) for shape in
-                                       ((RGB, PIXEL_SIZE, PIXEL_SIZE), (HIDDEN, SIZE1, SIZE1), (OUTS2, FULL2, FULL2)))
-            self._frame, self._planes1, self._planes2 = frame.numpy(), planes1.numpy(), planes2.numpy()
-            self._tensors = planes1[:-SLACK], planes2[:-SLACK]  # what tanh_ overwrites
+            self._frame, self._planes1, self._planes2 = (
+                np.zeros(int(np.prod(shape)) + SLACK, np.float32)
+                for shape in ((RGB, PIXEL_SIZE, PIXEL_SIZE), (HIDDEN, SIZE1, SIZE1), (OUTS2, FULL2, FULL2)))
+            self._tensors = torch.from_numpy(pooled1), torch.from_numpy(pooled2)  # what tanh_ overwrites
             self._inputs = self._frame[:-SLACK].reshape(RGB, PIXEL_SIZE, PIXEL_SIZE)
             self._columns = np.zeros((HIDDEN, POOLED1, 2, COLUMNS), np.float32)
             self._columns_flat = self._columns.reshape(-1)  # the same floats, as ordered_conv2 reads them
@@ -302,11 +309,12 @@ class ConvFeatures:
         (conv1, conv2), (tanh1, tanh2) = self._weights, self._tensors
         planes1, pooled1, planes2, pooled2 = self._pooling
         ordered_conv1(self._planes1, self._frame, conv1)
-        tanh1.tanh_()
-        pool_and_split(planes1, pooled1, self._columns)
+        max_pool2(planes1, pooled1)
+        tanh1.tanh_()  # pooled, then tanh: torch's values (the module's docstring)
+        split_columns(pooled1, self._columns)
         ordered_conv2(self._planes2, self._columns_flat, conv2)
-        tanh2.tanh_()
         max_pool2(planes2, pooled2)
+        tanh2.tanh_()
         return self._features
 
 
@@ -315,9 +323,12 @@ def torch_order_holds() -> bool:
     """Whether the ordered kernels give torch's ``conv2d`` bits on this machine: checked once per process
     on random frames and weights, large weights, and a black frame under negative weights (the sign
     of a zero sum), each convolution's outputs and the features compared bit for bit. A different
-    summation order, or multiply-adds rounded twice, changes the low bits of most outputs."""
+    summation order, or multiply-adds rounded twice, changes the low bits of most outputs. And whether
+    torch's tanh allows pooling before it (``_tanh_pools_first``)."""
     import torch
 
+    if not _tanh_pools_first(torch):
+        return False
     rng = np.random.default_rng(0)
     sizes = [int(np.prod(shape)) for shape in conv_shapes(RGB)]
     frames = [rng.random((RGB, PIXEL_SIZE, PIXEL_SIZE), dtype=np.float32) for _ in range(2)]
@@ -338,6 +349,24 @@ def torch_order_holds() -> bool:
         if not (_same_bits(planes1, sums1.numpy()) and _same_bits(planes2, sums2.numpy())):
             return False
     return True
+
+
+def _tanh_pools_first(torch, blocks: int = 40, run: int = 1 << 16) -> bool:
+    """Whether torch's ``tanh_`` is, on a dense sample of float32, non-decreasing, zero only at zero, of
+    its input's sign, NaN for NaN, and the same on a slice as on the whole: what makes the tanh of a
+    window's maximum the maximum of its tanhs, bit for bit (the module's docstring). The sample: runs of
+    ``run`` consecutive floats from ``blocks`` places between 0 and 10 (past which tanh is 1 in
+    float32), subnormals first, and their negatives; about 60 ms."""
+    starts = np.linspace(0, np.float32(10.0).view(np.uint32), blocks).astype(np.uint32)
+    positive = (starts[:, None] + np.arange(run, dtype=np.uint32)).reshape(-1).view(np.float32)
+    floats = np.concatenate([-positive[::-1], positive, [np.nan, np.inf, -np.inf]]).astype(np.float32)
+    with torch.inference_mode():
+        tanh = torch.from_numpy(floats.copy()).tanh_().numpy()
+        part = torch.from_numpy(floats[3:run].copy()).tanh_().numpy()
+    finite, values = tanh[:-3], floats[:-3]
+    return bool(np.all(np.diff(finite) >= 0) and np.array_equal(np.signbit(finite), np.signbit(values))
+                and np.all((finite == 0) == (values == 0)) and np.isnan(tanh[-3])
+                and np.array_equal(tanh[-2:], [1, -1]) and _same_bits(part, tanh[3:run]))
 
 
 def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:

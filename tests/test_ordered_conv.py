@@ -1,8 +1,9 @@
 """The default pixel CNN's compiled convolutions in torch's order (``policies.conv.ordered_conv1``,
 ``ordered_conv2``): against the equations written out with an exact fused multiply-add, against torch's
 ``conv2d`` bit for bit, the features against torch's path on random and CarRacing frames, twice;
-and the check (``torch_order_holds``) that picks the path, its refusal of another order, and what
-runs when it fails. tests/test_pinned.py's pixel cases pin the numbers themselves.
+and the check (``torch_order_holds``) that picks the path, its refusal of another order or of a tanh
+that the pooling cannot go before, and what runs when it fails. tests/test_pinned.py's pixel cases pin
+the numbers themselves.
 """
 
 from __future__ import annotations
@@ -13,7 +14,8 @@ import numpy as np
 import pytest
 
 import policies.conv as conv
-from policies.conv import ConvFeatures, max_pool2, ordered_conv1, ordered_conv2, pool_and_split, torch_order_holds
+from policies.conv import ConvFeatures, max_pool2, ordered_conv1, ordered_conv2, split_columns, torch_order_holds
+from policies.kernels import _TANH_CLAMP, _TANH_P, _TANH_Q
 from policies.network import PIXEL_SIZE, conv_shapes
 from tests.test_fast_conv import car_racing_frames
 
@@ -63,7 +65,7 @@ def run_kernels(frame: np.ndarray, vector: np.ndarray, pooled: np.ndarray) -> tu
     flat_frame[:frame.size] = frame.reshape(-1)
     planes1 = np.full(HIDDEN * SIZE1 * SIZE1 + SLACK, np.nan, np.float32)
     ordered_conv1(planes1, flat_frame, conv1)
-    columns = np.zeros((HIDDEN, POOLED1, 2, COLUMNS), np.float32)  # pool_and_split's layout
+    columns = np.zeros((HIDDEN, POOLED1, 2, COLUMNS), np.float32)  # split_columns' layout
     columns[:, :, 0, :(POOLED1 + 1) // 2], columns[:, :, 1, :POOLED1 // 2] = pooled[:, :, 0::2], pooled[:, :, 1::2]
     planes2 = np.full(SHAPES[1][0] * FULL2 * FULL2 + SLACK, np.nan, np.float32)
     ordered_conv2(planes2, columns.reshape(-1), conv2)
@@ -164,13 +166,81 @@ def test_other_channel_counts_take_torchs_path():
         ConvFeatures(vector, shapes, ordered=True)
 
 
-def test_pooling_into_columns_is_max_pool2_split():
-    rng = np.random.default_rng(15)
-    planes = rng.standard_normal((HIDDEN, SIZE1, SIZE1), dtype=np.float32)
-    pooled = np.empty((HIDDEN, POOLED1, POOLED1), np.float32)
+def test_the_columns_are_the_pooled_planes_split():
+    pooled = np.random.default_rng(15).standard_normal((HIDDEN, POOLED1, POOLED1), dtype=np.float32)
     columns = np.zeros((HIDDEN, POOLED1, 2, COLUMNS), np.float32)
-    pool_and_split(planes, pooled, columns)
-    expected = max_pool2(planes)
-    assert same_bits(pooled, expected)
-    assert same_bits(columns[:, :, 0, :21], expected[:, :, 0::2])
-    assert same_bits(columns[:, :, 1, :20], expected[:, :, 1::2])
+    split_columns(pooled, columns)
+    assert same_bits(columns[:, :, 0, :21], pooled[:, :, 0::2])
+    assert same_bits(columns[:, :, 1, :20], pooled[:, :, 1::2])
+
+
+class TanhOf:
+    """What ``_tanh_pools_first`` uses of torch, with ``tanh`` (float32 -> float32) as its tanh_."""
+
+    def __init__(self, tanh):
+        self.tanh = tanh
+
+    def inference_mode(self):
+        return torch.inference_mode()
+
+    def from_numpy(self, values):
+        tanh = self.tanh
+
+        class Tensor:
+            def tanh_(self):
+                return Tensor()
+
+            def numpy(self):
+                return tanh(values)
+        return Tensor()
+
+
+def test_pooling_before_tanh_is_torchs_pooling_of_tanh_on_windows_of_near_values():
+    """Windows of neighbouring floats, equal values, zeros of both signs, subnormals, saturation and NaNs:
+    tanh_ of max_pool2 is max_pool2 of tanh_, bit for bit, as the ordered path relies on."""
+    rng = np.random.default_rng(16)
+    centres = np.concatenate([rng.standard_normal(3000) * 3, [0.0, -0.0, 1e-42, -1e-42, 9.0, -9.0, 12.0]])
+    windows = []
+    for centre in centres.astype(np.float32):
+        steps = rng.integers(-2, 3, size=4)
+        windows.append([np.float32(centre).view(np.int32) + step for step in steps])
+    planes = np.array(windows, dtype=np.int32).view(np.float32).reshape(-1, 2, 2)
+    planes[0] = [[-0.0, 0.0], [0.0, -0.0]]
+    planes[1] = [[0.0, -0.0], [-1e-42, 1e-42]]
+    planes[2] = [[np.nan, 1.0], [2.0, np.nan]]
+    planes = np.ascontiguousarray(planes.transpose(1, 0, 2).reshape(2, -1)[None].repeat(2, axis=1).reshape(1, 4, -1))
+    with torch.inference_mode():
+        expected = max_pool2(torch.from_numpy(planes.copy()).tanh_().numpy())
+        got = torch.from_numpy(max_pool2(planes)).tanh_().numpy()
+    assert same_bits(got, expected)
+
+
+def torch_tanh(x: np.ndarray) -> np.ndarray:
+    return torch.from_numpy(x.astype(np.float32)).tanh_().numpy()
+
+
+def rational_tanh(x: np.ndarray) -> np.ndarray:
+    """The dense head's rational tanh (``policies.kernels``), in float32, term by term."""
+    x = np.clip(x.astype(np.float32), -_TANH_CLAMP, _TANH_CLAMP)
+    x2, p, q = x * x, np.float32(_TANH_P[0]), np.float32(_TANH_Q[0])
+    for c in _TANH_P[1:]:
+        p = p * x2 + np.float32(c)
+    for c in _TANH_Q[1:]:
+        q = q * x2 + np.float32(c)
+    return x * p / q
+
+
+def test_the_check_accepts_torchs_tanh_and_refuses_others():
+    """Torch's tanh here passes. Refused: the dense head's rational tanh (a step down of one ulp at some
+    floats), torch's with subnormals flushed to zero, torch's with the sign of zero lost."""
+    if torch_order_holds():
+        assert conv._tanh_pools_first(torch) and conv._tanh_pools_first(TanhOf(torch_tanh))
+    tiny = np.finfo(np.float32).tiny
+    for tanh in (rational_tanh, lambda x: np.where(np.abs(x) < tiny, np.float32(0), torch_tanh(x)),
+                 lambda x: torch_tanh(x) + np.float32(0)):
+        assert not conv._tanh_pools_first(TanhOf(tanh))
+
+
+def test_a_tanh_the_pooling_cannot_go_before_means_torchs_path(monkeypatch):
+    monkeypatch.setattr(conv, "_tanh_pools_first", lambda torch: False)
+    assert torch_order_holds.__wrapped__() is False
