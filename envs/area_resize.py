@@ -9,7 +9,9 @@ rows of each output row, and rounds half to even into uint8. This module builds 
 shape and sums in the same order, with each column's and row's terms padded to a fixed count by terms
 of weight 0: a pixel times 0 is +0, and a non-negative float32 plus +0 is itself, so the sums keep
 their bits. Each source row is summed across once, where OpenCV sums it again for every output row it
-touches; the sums are the same.
+touches; the sums are the same. Along a row, outputs whose terms read consecutive source values (from
+96 to 84, stretches of 7 pixels: 21 values) are summed a stretch at a time, term by term, which
+vectorises: 96 rows in about 10 us instead of 70 with a gathered load per term.
 
 ``PixelObservation`` uses it where it applies (``takes_area_path``) and ``cv2.resize`` otherwise.
 No ``fastmath``: the sums must round as OpenCV's do. ``tests/test_area_resize.py`` compares it with
@@ -78,13 +80,23 @@ def _padded(terms: list[tuple[int, int, np.float32]], size: int, channels: int) 
             np.repeat(weights, channels, axis=1))
 
 
+def _stretches(indices: np.ndarray) -> np.ndarray:
+    """(first output, length) of each maximal stretch of outputs along which every term's source index
+    steps by one, from (terms, outputs) indices."""
+    steps = np.all(np.diff(indices, axis=1) == 1, axis=0)  # between output i and i + 1
+    breaks = np.flatnonzero(~steps) + 1
+    starts = np.concatenate([[0], breaks])
+    return np.stack([starts, np.diff(np.append(starts, indices.shape[1]))], axis=1).astype(np.int64)
+
+
 @functools.lru_cache(maxsize=8)
 def area_tables(source: tuple[int, int], size: tuple[int, int], channels: int) -> tuple[np.ndarray, ...]:
-    """(column indices, column weights, row indices, row weights) of a resize of a ``channels``-channel
-    frame from ``source`` to ``size`` (both (height, width)), for ``area_planes``."""
+    """(column indices, column weights, their stretches, row indices, row weights) of a resize of a
+    ``channels``-channel frame from ``source`` to ``size`` (both (height, width)), for ``area_planes``."""
     (height, width), (out_height, out_width) = source, size
     row_indices, row_weights = _padded(_area_terms(height, out_height), out_height, 1)
-    tables = (*_padded(_area_terms(width, out_width), out_width, channels), row_indices, row_weights)
+    columns, column_weights = _padded(_area_terms(width, out_width), out_width, channels)
+    tables = (columns, column_weights, _stretches(columns), row_indices, row_weights)
     for table in tables:
         table.flags.writeable = False
     return tables
@@ -98,7 +110,6 @@ class AreaResize:
         height, width, channels = shape
         self.shape, self.size = shape, size
         self._tables = area_tables((height, width), size, channels)
-        self._line = np.empty(width * channels, dtype=np.float32)
         self._across = np.empty((height, size[1] * channels), dtype=np.float32)
         self._rows = np.empty((size[0], size[1] * channels), dtype=np.float32)
 
@@ -106,24 +117,25 @@ class AreaResize:
         height, width, channels = self.shape
         out = np.empty((channels, self.size[1], self.size[0]), dtype=np.float32)
         flat = np.ascontiguousarray(frame).reshape(height, width * channels)
-        area_planes(flat, *self._tables, self._line, self._across, self._rows, out)
+        area_planes(flat, *self._tables, self._across, self._rows, out)
         return out
 
 
 @njit(cache=True, nogil=True)
-def area_planes(frame, columns, column_weights, rows, row_weights, line, across, resized, out) -> None:
+def area_planes(frame, columns, column_weights, stretches, rows, row_weights, across, resized, out) -> None:
     """out[c, x, y] = float32(``cv2.resize(frame, INTER_AREA)[y, x, c]``) / 255 for a frame of (H, W * C)
-    uint8 and out (C, w, h); scratch: line (W * C,), across (H, w * C), each source row summed across,
-    and resized (h, w * C)."""
+    uint8 and out (C, w, h); scratch: across (H, w * C), each source row summed across, and resized
+    (h, w * C)."""
     for source_row in range(frame.shape[0]):
         pixels, sums = frame[source_row], across[source_row]
-        for index in range(pixels.size):
-            line[index] = np.float32(pixels[index])
         sums[:] = np.float32(0.0)
-        for term in range(columns.shape[0]):  # OpenCV's order: buf[dx] += S[sx] * alpha, term by term
-            indices, weights = columns[term], column_weights[term]
-            for index in range(sums.size):
-                sums[index] += line[indices[index]] * weights[index]
+        for stretch in range(stretches.shape[0]):
+            first, length = stretches[stretch, 0], stretches[stretch, 1]
+            for term in range(columns.shape[0]):  # OpenCV's order: buf[dx] += S[sx] * alpha, term by term
+                start, weights = columns[term, first], column_weights[term, first:first + length]
+                part, source = sums[first:first + length], pixels[start:start + length]
+                for index in range(length):
+                    part[index] += np.float32(source[index]) * weights[index]
     for y in range(rows.shape[1]):
         sums = resized[y]
         sums[:] = np.float32(0.0)

@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
-from envs.area_resize import AreaResize, takes_area_path
+from envs.area_resize import AreaResize, area_tables, takes_area_path
 from envs.car_racing import FastCarRacing
 from envs.wrappers import PixelObservation
 
@@ -59,6 +59,15 @@ def test_area_resize_to_other_sizes(size):
     resize = AreaResize((96, 96, 3), size)
     for frame in frames(np.random.default_rng(size[0]), (96, 96, 3), 6):
         assert same_bits(resize(frame), original(frame, size))
+
+
+def test_car_racings_columns_are_summed_in_stretches_of_seven_pixels():
+    """From 96 to 84, every 8 source pixels make 7 outputs, each reading two neighbouring pixels: 12
+    stretches of 21 values (7 RGB pixels) whose terms read consecutive source values, which vectorise."""
+    columns, _, stretches, *_ = area_tables((96, 96), (84, 84), 3)
+    assert stretches.tolist() == [[21 * k, 21] for k in range(12)]
+    for first, length in stretches:
+        assert (np.diff(columns[:, first:first + length], axis=1) == 1).all()
 
 
 def test_the_area_path_is_where_opencv_takes_it():
