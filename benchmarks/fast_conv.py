@@ -11,6 +11,9 @@ and ``--fast_conv``'s compiled pass (issue 21, item 3), in one run.
   initialisation (the static network's generation 0) and N(0, 1) (the Hebbian network's CNN);
 - tanh: the largest error of the compiled pass's rational tanh against ``math.tanh`` (double), and
   whether it is non-decreasing, over every ``--tanh_every``-th float32 of [0, 8] (1: all of them);
+  and whether torch's tanh, over every ``--tanh_every``-th float32 of either sign (1: all 2^32), is
+  what the default's pooling before it needs (``policies.conv``: non-decreasing, zero only at zero,
+  of its input's sign, odd);
 - outputs: the static and the Hebbian networks' outputs on those frames, in order, with and without it;
 - returns: one static and one Hebbian parameter vector (generation-0 draws, fixed seeds) evaluated
   with and without the flag on the same ``--episodes`` seeds, episodes capped at ``--steps``.
@@ -123,6 +126,28 @@ def tanh_error(every: int) -> tuple[float, float, float, float, int]:
     return largest, at, largest_ulp, at_ulp, decreases
 
 
+def torch_tanh_pools_first(every: int, chunk: int = 1 << 24) -> dict[str, int]:
+    """torch's ``tanh_`` over every ``every``-th float32 from +0 to +inf and their negatives, in order:
+    how often it steps down from one checked float to the next, is 0 away from 0, has another sign
+    than its input, and is not odd (tanh(-x) is not -tanh(x), bit for bit). All 0: pooling before it
+    gives the bits of pooling after it (``policies.conv``)."""
+    import torch
+
+    found = {"decreasing steps": 0, "zeros away from zero": 0, "signs changed": 0, "not odd": 0}
+    top, previous = int(np.float32(np.inf).view(np.uint32)), np.float32(0.0)
+    with torch.inference_mode():
+        for start in range(0, top + 1, chunk * every):
+            x = np.arange(start, min(start + chunk * every, top + 1), every, dtype=np.uint32).view(np.float32)
+            y = torch.from_numpy(x.copy()).tanh_().numpy()
+            negative = torch.from_numpy(-x).tanh_().numpy()
+            found["decreasing steps"] += int((np.diff(y) < 0).sum()) + int(y[0] < previous)
+            found["zeros away from zero"] += int(((y == 0) & (x != 0)).sum() + ((negative == 0) & (x != 0)).sum())
+            found["signs changed"] += int(np.signbit(y).sum() + (~np.signbit(negative)).sum())
+            found["not odd"] += int((negative.view(np.uint32) != (-y).view(np.uint32)).sum())
+            previous = y[-1]
+    return found
+
+
 def actions(frames: list[np.ndarray]) -> None:
     """The networks' outputs on the same sequence of frames, with and without the flag (the Hebbian
     network's weights change along it, so differences could grow)."""
@@ -166,7 +191,8 @@ def main() -> None:
     parser.add_argument("--episodes", type=positive_int, default=3, help="episodes per network and path")
     parser.add_argument("--steps", type=positive_int, default=300, help="the episodes' cap")
     parser.add_argument("--tanh_every", type=positive_int, default=64,
-                        help="1: every float32 of [0, 8] (about a minute)")
+                        help="1: every float32 of [0, 8] for the rational tanh (about a minute) and all 2^32 for "
+                             "torch's (about two minutes)")
     args = parser.parse_args()
     frames = observations(args.frames)
     speed(frames, args.rounds)
@@ -175,6 +201,11 @@ def main() -> None:
     checked = "every float32" if args.tanh_every == 1 else f"every {args.tanh_every}th float32"
     print(f"tanh on {checked} of [0, 8]: largest error {largest:.2e} (at x = {at:.6g}), {ulps:.1f} ulp "
           f"(at x = {at_ulp:.6g}); decreasing steps: {decreases}")
+    found = torch_tanh_pools_first(args.tanh_every)
+    verdict = ("pooling before it would not give torch's bits" if any(found.values())
+               else "pooling before it gives torch's bits" if args.tanh_every == 1 else "none found")
+    print(f"torch's tanh on {checked} of either sign: "
+          + ", ".join(f"{name} {count}" for name, count in found.items()) + f": {verdict}")
     actions(frames)
     returns(args.episodes, args.steps)
 
