@@ -75,18 +75,15 @@ def _dense(weights_t, pre, post, scale, squash):
             post[j] *= scale
 
 
-@njit(**_FLAGS)
-def _largest_magnitude(values):
-    # max |w| on the IEEE bit patterns: for non-negative floats their order is the integers'
-    # order, and an integer max reduction vectorises where a float one does not.
-    bits = values.view(np.uint32)
-    largest = np.uint32(0)
+@njit(inline="always")
+def _largest_bits(bits, largest):
+    """The largest of ``largest`` and the magnitudes of the float32 whose bit patterns are ``bits``:
+    for non-negative floats their order is the integers' order, and an integer max reduction
+    vectorises where a float one does not."""
     for index in range(bits.shape[0]):
         magnitude = bits[index] & _ABS_BITS
         largest = magnitude if magnitude > largest else largest
-    result = np.empty(1, dtype=np.uint32)
-    result[0] = largest
-    return result.view(np.float32)[0]
+    return largest
 
 
 @njit(**_FLAGS)
@@ -95,6 +92,8 @@ def _plastic(weights_t, folded, pre, post, scale, squash, normalise):
     that normalises the updated layer (1 / max |w|), or 1."""
     _dense(weights_t, pre, post, scale, squash)
     n_in, n_out = weights_t.shape
+    bits = weights_t.view(np.uint32)
+    largest = np.uint32(0)
     for i in range(n_in):
         activity = pre[i]
         row = weights_t[i]
@@ -104,11 +103,17 @@ def _plastic(weights_t, folded, pre, post, scale, squash, normalise):
         d = folded[3, i]
         for j in range(n_out):
             row[j] = row[j] * scale + (a[j] * post[j] + b[j]) * activity + (c[j] * post[j] + d[j])
+        if normalise:  # the row's largest |w| while it is in the cache: a pass over the whole layer
+            largest = _largest_bits(bits[i], largest)  # afterwards cost ~20 us more in CarRacing's loop
+        # (the max inside the update loop was faster, but under fastmath it changed how LLVM compiled
+        # the update, and so its bits: the pinned hashes moved)
     one = np.float32(1.0)
     if not normalise:
         return one
-    largest = _largest_magnitude(weights_t.reshape(-1))
-    return one / largest if largest > 0 else one
+    found = np.empty(1, dtype=np.uint32)
+    found[0] = largest
+    magnitude = found.view(np.float32)[0]
+    return one / magnitude if magnitude > 0 else one
 
 
 @njit(**_FLAGS)
