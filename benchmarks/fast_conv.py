@@ -192,7 +192,7 @@ def main() -> None:
     parser.add_argument("--steps", type=positive_int, default=300, help="the episodes' cap")
     parser.add_argument("--tanh_every", type=positive_int, default=64,
                         help="1: every float32 of [0, 8] for the rational tanh (about a minute) and all 2^32 for "
-                             "torch's (about two minutes)")
+                             "torch's (about a minute)")
     args = parser.parse_args()
     frames = observations(args.frames)
     speed(frames, args.rounds)

@@ -11,7 +11,7 @@ of weight 0: a pixel times 0 is +0, and a non-negative float32 plus +0 is itself
 their bits. Each source row is summed across once, where OpenCV sums it again for every output row it
 touches; the sums are the same. Along a row, outputs whose terms read consecutive source values (from
 96 to 84, stretches of 7 pixels: 21 values) are summed a stretch at a time, term by term, which
-vectorises: 96 rows in about 10 us instead of 70 with a gathered load per term.
+vectorises where a gathered load per term did not (a CarRacing frame's resize 118 -> 81 us here).
 
 ``PixelObservation`` uses it where it applies (``takes_area_path``) and ``cv2.resize`` otherwise.
 No ``fastmath``: the sums must round as OpenCV's do. ``tests/test_area_resize.py`` compares it with

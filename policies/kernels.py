@@ -104,7 +104,7 @@ def _plastic(weights_t, folded, pre, post, scale, squash, normalise):
         for j in range(n_out):
             row[j] = row[j] * scale + (a[j] * post[j] + b[j]) * activity + (c[j] * post[j] + d[j])
         if normalise:  # the row's largest |w| while it is in the cache: a pass over the whole layer
-            largest = _largest_bits(bits[i], largest)  # afterwards cost ~20 us more in CarRacing's loop
+            largest = _largest_bits(bits[i], largest)  # afterwards cost ~17 us more in CarRacing's loop
         # (the max inside the update loop was faster, but under fastmath it changed how LLVM compiled
         # the update, and so its bits: the pinned hashes moved)
     one = np.float32(1.0)
