@@ -201,14 +201,14 @@ def test_pooling_before_tanh_is_torchs_pooling_of_tanh_on_windows_of_near_values
     rng = np.random.default_rng(16)
     centres = np.concatenate([rng.standard_normal(3000) * 3, [0.0, -0.0, 1e-42, -1e-42, 9.0, -9.0, 12.0]])
     windows = []
-    for centre in centres.astype(np.float32):
-        steps = rng.integers(-2, 3, size=4)
-        windows.append([np.float32(centre).view(np.int32) + step for step in steps])
-    planes = np.array(windows, dtype=np.int32).view(np.float32).reshape(-1, 2, 2)
+    for centre in centres.astype(np.float32):  # four floats within 2 ulps of the centre, on its side of zero
+        bits = np.maximum(np.abs(centre).view(np.int32) + rng.integers(-2, 3, size=4, dtype=np.int32), 0)
+        windows.append(bits.view(np.float32) * (np.float32(-1) if np.signbit(centre) else np.float32(1)))
+    planes = np.array(windows, dtype=np.float32).reshape(-1, 2, 2)
     planes[0] = [[-0.0, 0.0], [0.0, -0.0]]
     planes[1] = [[0.0, -0.0], [-1e-42, 1e-42]]
     planes[2] = [[np.nan, 1.0], [2.0, np.nan]]
-    planes = np.ascontiguousarray(planes.transpose(1, 0, 2).reshape(2, -1)[None].repeat(2, axis=1).reshape(1, 4, -1))
+    planes = np.ascontiguousarray(planes.transpose(1, 0, 2).reshape(1, 2, -1))  # window k: columns 2k, 2k + 1
     with torch.inference_mode():
         expected = max_pool2(torch.from_numpy(planes.copy()).tanh_().numpy())
         got = torch.from_numpy(max_pool2(planes)).tanh_().numpy()
