@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from cli.flags import positive_int
 from envs import ProblemSpec, rollout
 from policies import PolicySettings
-from policies.conv import ConvFeatures, rational_tanh
+from policies.conv import ConvFeatures, rational_tanh, tanh_faults
 from policies.init import default_init
 from policies.network import Layout, conv_shapes
 
@@ -127,24 +127,18 @@ def tanh_error(every: int) -> tuple[float, float, float, float, int]:
 
 
 def torch_tanh_pools_first(every: int, chunk: int = 1 << 24) -> dict[str, int]:
-    """torch's ``tanh_`` over every ``every``-th float32 from +0 to +inf and their negatives, in order:
-    how often it steps down from one checked float to the next, is 0 away from 0, has another sign
-    than its input, and is not odd (tanh(-x) is not -tanh(x), bit for bit). All 0: pooling before it
-    gives the bits of pooling after it (``policies.conv``)."""
+    """``policies.conv.tanh_faults`` of torch's tanh over every ``every``-th float32 from +0 to +inf and their
+    negatives, a chunk at a time, each chunk starting at the last float of the one before (so a step down
+    between chunks counts)."""
     import torch
 
-    found = {"decreasing steps": 0, "zeros away from zero": 0, "signs changed": 0, "not odd": 0}
-    top, previous = int(np.float32(np.inf).view(np.uint32)), np.float32(0.0)
-    with torch.inference_mode():
-        for start in range(0, top + 1, chunk * every):
-            x = np.arange(start, min(start + chunk * every, top + 1), every, dtype=np.uint32).view(np.float32)
-            y = torch.from_numpy(x.copy()).tanh_().numpy()
-            negative = torch.from_numpy(-x).tanh_().numpy()
-            found["decreasing steps"] += int((np.diff(y) < 0).sum()) + int(y[0] < previous)
-            found["zeros away from zero"] += int(((y == 0) & (x != 0)).sum() + ((negative == 0) & (x != 0)).sum())
-            found["signs changed"] += int(np.signbit(y).sum() + (~np.signbit(negative)).sum())
-            found["not odd"] += int((negative.view(np.uint32) != (-y).view(np.uint32)).sum())
-            previous = y[-1]
+    found: dict[str, int] = {}
+    top = int(np.float32(np.inf).view(np.uint32))
+    for start in range(0, top + 1, chunk * every):
+        first = max(start - every, 0)
+        x = np.arange(first, min(start + chunk * every, top + 1), every, dtype=np.uint32).view(np.float32)
+        for name, count in tanh_faults(torch, x).items():
+            found[name] = found.get(name, 0) + count
     return found
 
 

@@ -353,22 +353,34 @@ def torch_order_holds() -> bool:
     return True
 
 
-def _tanh_pools_first(torch, blocks: int = 40, run: int = 1 << 16) -> bool:
-    """Whether torch's ``tanh_`` is, on a dense sample of float32, non-decreasing, zero only at zero, of
-    its input's sign, NaN for NaN, and the same on a slice as on the whole: what makes the tanh of a
-    window's maximum the maximum of its tanhs, bit for bit (the module's docstring). The sample: runs of
-    ``run`` consecutive floats from ``blocks`` places between 0 and 10 (past which tanh is 1 in
-    float32), subnormals first, and their negatives; about 60 ms."""
-    starts = np.linspace(0, np.float32(10.0).view(np.uint32), blocks).astype(np.uint32)
-    positive = (starts[:, None] + np.arange(run, dtype=np.uint32)).reshape(-1).view(np.float32)
-    floats = np.concatenate([-positive[::-1], positive, [np.nan, np.inf, -np.inf]]).astype(np.float32)
+def tanh_faults(torch, magnitudes: np.ndarray) -> dict[str, int]:
+    """What would keep pooling before torch's ``tanh_`` from giving torch's bits, counted over
+    ``magnitudes`` (increasing non-negative float32) and their negatives: steps down from one float to
+    the next, zeros away from zero, results of another sign than their input, and tanh(-x) not
+    -tanh(x) bit for bit. All 0 on every float32: the tanh of a window's maximum is the maximum of
+    its tanhs (the module's docstring)."""
     with torch.inference_mode():
-        tanh = torch.from_numpy(floats.copy()).tanh_().numpy()
-        part = torch.from_numpy(floats[3:run].copy()).tanh_().numpy()
-    finite, values = tanh[:-3], floats[:-3]
-    return bool(np.all(np.diff(finite) >= 0) and np.array_equal(np.signbit(finite), np.signbit(values))
-                and np.all((finite == 0) == (values == 0)) and np.isnan(tanh[-3])
-                and np.array_equal(tanh[-2:], [1, -1]) and _same_bits(part, tanh[3:run]))
+        up = torch.from_numpy(magnitudes.copy()).tanh_().numpy()
+        down = torch.from_numpy(-magnitudes).tanh_().numpy()
+    return {"decreasing steps": int((np.diff(up) < 0).sum() + (np.diff(down) > 0).sum()),
+            "zeros away from zero": int((((up == 0) | (down == 0)) & (magnitudes != 0)).sum()),
+            "signs changed": int(np.signbit(up).sum() + (~np.signbit(down)).sum()),
+            "not odd": int((down.view(np.uint32) != (-up).view(np.uint32)).sum())}
+
+
+def _tanh_pools_first(torch, blocks: int = 40, run: int = 1 << 16) -> bool:
+    """``tanh_faults`` none on a dense sample, NaN for NaN, +-1 for +-inf, and the same bits on a slice
+    as on the whole. The sample: runs of ``run`` consecutive floats from ``blocks`` places between 0
+    and 10 (past which tanh is 1 in float32), subnormals first, and their negatives; about 60 ms."""
+    starts = np.linspace(0, np.float32(10.0).view(np.uint32), blocks).astype(np.uint32)
+    magnitudes = (starts[:, None] + np.arange(run, dtype=np.uint32)).reshape(-1).view(np.float32)
+    if any(tanh_faults(torch, magnitudes).values()):
+        return False
+    with torch.inference_mode():
+        special = torch.from_numpy(np.float32([np.nan, np.inf, -np.inf])).tanh_().numpy()
+        whole = torch.from_numpy(magnitudes.copy()).tanh_().numpy()
+        part = torch.from_numpy(magnitudes[3:run].copy()).tanh_().numpy()
+    return bool(np.isnan(special[0]) and np.array_equal(special[1:], [1, -1]) and _same_bits(part, whole[3:run]))
 
 
 def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
