@@ -197,47 +197,6 @@ def _unpack(record):
     return record & mask, (record >> SPAN_BITS) & mask, (record >> 28) & 0xFFFFFF, (record >> 20) & 0xFF
 
 
-@njit(inline="always", **_FLAGS)  # (called per row: as a call, 3-6 % of observe's time)
-def _same_spans(records, counts, y):
-    """Are row ``y``'s span records those of row ``y - 1``, in the same order?"""
-    if counts[y] != counts[y - 1]:
-        return False
-    for k in range(counts[y]):
-        if records[y, k] != records[y - 1, k]:
-            return False
-    return True
-
-
-@njit(inline="always", **_FLAGS)  # (called per row: as a call, 3-6 % of observe's time)
-def _resolve_row(y, row, mixed, column_of, records, counts, background, text, text_x, text_y):
-    """Paint row ``y``'s spans over the background, then the text; flag the output pixels in
-    which two neighbouring source pixels differ. They can differ only at a span's end (x1, or
-    x2 + 1), and do not where a later span hides it or the colours are the same: those are looked
-    up in the painted row (about 4.6 flagged output pixels per row instead of 7.9)."""
-    width = row.shape[0]
-    row[:] = background
-    spans = records[y]
-    for k in range(counts[y]):
-        x1, x2, color, alpha = _unpack(spans[k])
-        if alpha == 255:
-            row[x1:x2 + 1] = color
-        else:
-            row[x1] = blend(row[x1], color, alpha)
-    for k in range(counts[y]):
-        x1, x2, _, _ = _unpack(spans[k])
-        if x1 > 0 and row[x1] != row[x1 - 1]:
-            mixed[column_of[x1]] = True  # pixels x1 - 1 and x1 are in the output pixel of x1
-        if x2 + 1 < width and row[x2 + 1] != row[x2]:
-            mixed[column_of[x2 + 1]] = True
-    line = y - text_y
-    if 0 <= line < text.shape[0]:
-        for x in range(max(text_x, 0), min(text_x + text.shape[1], width)):
-            row[x] = text[line, x - text_x]
-            mixed[column_of[x]] = True
-        if text_x + text.shape[1] < width:
-            mixed[column_of[max(text_x + text.shape[1], 0)]] = True
-
-
 @njit(**_FLAGS)
 def observe(records, counts, background, text, text_x, text_y, x_schedule, y_schedule, work, out):
     """The (rows, columns, RGB) observation of a height x width picture given as span records.
@@ -252,10 +211,14 @@ def observe(records, counts, background, text, text_x, text_y, x_schedule, y_sch
     columns the row is of one colour, and those columns are copied from the palette's row for that
     colour (found in the cache of recent colours first); a flagged one is summed (``_mixed_pixel``).
     Written in one loop: this is the observation's hot path, and the same code as helper functions
-    ran 25 % slower.
+    ran 25 % slower. A row's painting and flags are written out here too, not in a helper inlined
+    by numba: an inlined function's array arguments are new references, and where its body has
+    loops numba does not prune their counts, so each row paid an atomic increment and decrement per
+    array (0.9x the time without them). Uniform columns are copied with unsigned indices, which
+    need no check for negative ones, so that the copy is vectorised.
     """
     row, mixed, words, shrunk, palette, rows, cache, fewest = work
-    height, column_of, columns = records.shape[0], x_schedule[4], shrunk.shape[0]
+    height, column_of, columns, width = records.shape[0], x_schedule[4], shrunk.shape[0], row.shape[0]
     x_reciprocal, x_shared, x_weights, x_carried = x_schedule[0], x_schedule[1], x_schedule[2], x_schedule[3]
     reciprocal, shared, weights, carried, _ = y_schedule
     sums = np.zeros(columns, dtype=np.int64)
@@ -263,8 +226,38 @@ def observe(records, counts, background, text, text_x, text_y, x_schedule, y_sch
     for y in range(height):
         # a row drawn as the previous one was is the same row: its shrunk pixels are there already
         text_row = text.shape[0] > 0 and text_y <= y <= text_y + text.shape[0]  # (or the row after it)
-        if y == 0 or text_row or not _same_spans(records, counts, y):
-            _resolve_row(y, row, mixed, column_of, records, counts, background, text, text_x, text_y)
+        same = y > 0 and not text_row and counts[y] == counts[y - 1]  # (the same records, in the same order)
+        if same:
+            for k in range(counts[y]):
+                if records[y, k] != records[y - 1, k]:
+                    same = False
+                    break
+        if not same:  # paint the row's spans over the background, then the text
+            for x in range(width):
+                row[x] = background
+            for k in range(counts[y]):
+                x1, x2, color, alpha = _unpack(records[y, k])
+                if alpha == 255:
+                    for x in range(x1, x2 + 1):
+                        row[x] = color
+                else:
+                    row[x1] = blend(row[x1], color, alpha)
+            # flag the output pixels in which two neighbouring source pixels differ: only at a span's
+            # end (x1, or x2 + 1), and not where a later span hides it or the colours are the same,
+            # which the painted row tells (about 4.6 flagged output pixels per row instead of 7.9)
+            for k in range(counts[y]):
+                x1, x2, _, _ = _unpack(records[y, k])
+                if x1 > 0 and row[x1] != row[x1 - 1]:
+                    mixed[column_of[x1]] = True  # pixels x1 - 1 and x1 are in the output pixel of x1
+                if x2 + 1 < width and row[x2 + 1] != row[x2]:
+                    mixed[column_of[x2 + 1]] = True
+            line = y - text_y
+            if 0 <= line < text.shape[0]:
+                for x in range(max(text_x, 0), min(text_x + text.shape[1], width)):
+                    row[x] = text[line, x - text_x]
+                    mixed[column_of[x]] = True
+                if text_x + text.shape[1] < width:
+                    mixed[column_of[max(text_x + text.shape[1], 0)]] = True
             start = 0
             for index in range(words.shape[0]):
                 word = words[index]
@@ -280,8 +273,8 @@ def observe(records, counts, background, text, text_x, text_y, x_schedule, y_sch
                         entry = cache[slot + 1]
                         if cache[slot] != color:
                             entry = _missed_entry(color, palette, rows, x_schedule, cache)
-                        if entry >= 0:
-                            for uniform in range(start, column):
+                        if entry >= 0:  # (unsigned indices: a copy without negative-index checks, vectorised)
+                            for uniform in range(np.uint64(start), np.uint64(column)):
                                 shrunk[uniform] = rows[entry, uniform]
                         else:  # the palette is full
                             for uniform in range(start, column):
