@@ -10,8 +10,9 @@ shape and sums in the same order, with each column's and row's terms padded to a
 of weight 0: a pixel times 0 is +0, and a non-negative float32 plus +0 is itself, so the sums keep
 their bits. Each source row is summed across once, where OpenCV sums it again for every output row it
 touches; the sums are the same. Along a row, outputs whose terms read consecutive source values (from
-96 to 84, stretches of 7 pixels: 21 values) are summed a stretch at a time, term by term, which
-vectorises where a gathered load per term did not (a CarRacing frame's resize 118 -> 81 us here).
+96 to 84, stretches of 7 pixels: 21 values) are summed a stretch at a time, which vectorises where a
+gathered load per term did not (a CarRacing frame's resize 118 -> 81 us here); with two terms per output,
+both in one loop, and the planes written four rows at a time (81 -> 54 us).
 
 ``PixelObservation`` uses it where it applies (``takes_area_path``) and ``cv2.resize`` otherwise.
 No ``fastmath``: the sums must round as OpenCV's do. ``tests/test_area_resize.py`` compares it with
@@ -125,28 +126,57 @@ class AreaResize:
 def area_planes(frame, columns, column_weights, stretches, rows, row_weights, across, resized, out) -> None:
     """out[c, x, y] = float32(``cv2.resize(frame, INTER_AREA)[y, x, c]``) / 255 for a frame of (H, W * C)
     uint8 and out (C, w, h); scratch: across (H, w * C), each source row summed across, and resized
-    (h, w * C)."""
+    (h, w * C).
+
+    Where every output has two terms (a downscale by less than 2, as CarRacing's), both are summed in
+    one loop, ``(0 + first) + second``: OpenCV's two steps from a sum of 0, rounded as it rounds them,
+    in 0.6x the time of a loop per term. The planes are written four output rows at a time, so that
+    each write into a plane is four consecutive floats (0.5x the time of one at a time)."""
+    zero = np.float32(0.0)
     for source_row in range(frame.shape[0]):
         pixels, sums = frame[source_row], across[source_row]
-        sums[:] = np.float32(0.0)
         for stretch in range(stretches.shape[0]):
             first, length = stretches[stretch, 0], stretches[stretch, 1]
+            part = sums[first:first + length]
+            if columns.shape[0] == 2:
+                one, two = pixels[columns[0, first]:], pixels[columns[1, first]:]
+                weights_one = column_weights[0, first:first + length]
+                weights_two = column_weights[1, first:first + length]
+                for index in range(length):
+                    part[index] = ((zero + np.float32(one[index]) * weights_one[index])
+                                   + np.float32(two[index]) * weights_two[index])
+                continue
+            part[:] = zero
             for term in range(columns.shape[0]):  # OpenCV's order: buf[dx] += S[sx] * alpha, term by term
                 start, weights = columns[term, first], column_weights[term, first:first + length]
-                part, source = sums[first:first + length], pixels[start:start + length]
+                source = pixels[start:start + length]
                 for index in range(length):
                     part[index] += np.float32(source[index]) * weights[index]
     for y in range(rows.shape[1]):
         sums = resized[y]
-        sums[:] = np.float32(0.0)
-        for term in range(rows.shape[0]):  # sum += beta * buf, row by row
-            weight, summed = row_weights[term, y], across[rows[term, y]]
+        if rows.shape[0] == 2:
+            weight_one, one = row_weights[0, y], across[rows[0, y]]
+            weight_two, two = row_weights[1, y], across[rows[1, y]]
             for index in range(sums.size):
-                sums[index] += weight * summed[index]
+                sums[index] = (zero + weight_one * one[index]) + weight_two * two[index]
+        else:
+            sums[:] = zero
+            for term in range(rows.shape[0]):  # sum += beta * buf, row by row
+                weight, summed = row_weights[term, y], across[rows[term, y]]
+                for index in range(sums.size):
+                    sums[index] += weight * summed[index]
         for index in range(sums.size):  # saturate_cast<uchar>: cvRound, clamped; then numpy's uint8 / 255.0
-            sums[index] = min(max(np.rint(sums[index]), np.float32(0.0)), np.float32(255.0)) / np.float32(255.0)
-    channels = out.shape[0]
+            sums[index] = min(max(np.rint(sums[index]), zero), np.float32(255.0)) / np.float32(255.0)
+    channels, height = out.shape[0], out.shape[2]
+    whole = height - height % 4
+    for y in range(0, whole, 4):
+        first, second, third, fourth = resized[y], resized[y + 1], resized[y + 2], resized[y + 3]
+        for x in range(out.shape[1]):
+            for channel in range(channels):
+                index, plane = x * channels + channel, out[channel, x]
+                plane[y], plane[y + 1] = first[index], second[index]
+                plane[y + 2], plane[y + 3] = third[index], fourth[index]
     for channel in range(channels):
         for x in range(out.shape[1]):
-            for y in range(out.shape[2]):
+            for y in range(whole, height):
                 out[channel, x, y] = resized[y, x * channels + channel]

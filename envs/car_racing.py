@@ -70,6 +70,7 @@ _STATE_MODES = ("state_pixels", "state_pixels_list")
 # smoothscale's backends whose arithmetic envs.car_racing_observation reproduces (NEON runs the SSE2
 # code through sse2neon); with another (GENERIC: pygame's plain C filter), pygame shrinks the picture
 _SPAN_BACKENDS = ("SSE2", "NEON")
+_SCORES_KEPT = 256  # score texts whose pixels are kept (17.6 kB each: 4.5 MB at most per environment)
 
 
 def _rotated(x: np.ndarray, y: np.ndarray, angle: float) -> tuple[np.ndarray, np.ndarray]:
@@ -557,7 +558,7 @@ class FastCarRacing(stock.CarRacing):
         self._scaled: dict[tuple[int, int], pygame.Surface] = {}
         self._compiled_drawing = False
         self._spans: SpanObservation | None = None  # the observation without the full picture
-        self._score_pixels: tuple[str, np.ndarray, int, int] | None = None
+        self._score_pixels: dict[str, tuple[np.ndarray, int, int]] = {}  # per score text, up to _SCORES_KEPT
         self._font: pygame.font.Font | None = None
         self._score_text: tuple[str, pygame.Surface, pygame.Rect] | None = None
         self._road_source: list | None = None
@@ -807,19 +808,24 @@ class FastCarRacing(stock.CarRacing):
         return tuple(polygons) if fits else None
 
     def _score_image(self) -> tuple[np.ndarray, int, int]:
-        """The score's pixels as the stock blit writes them, and where: made once per distinct text."""
+        """The score's pixels as the stock blit writes them, and where: made once per distinct text and
+        kept, the first ``_SCORES_KEPT`` texts of this environment (an episode's scores recur in the next:
+        a text is rendered in about 60 us, and changes every few steps)."""
         text = f"{self.reward:04.0f}"
-        if self._score_pixels is None or self._score_pixels[0] != text:
-            if self._font is None:
-                self._font = pygame.font.Font(pygame.font.get_default_font(), 42)
-            image = self._font.render(text, True, (255, 255, 255), (0, 0, 0))
-            rect = image.get_rect()
-            rect.center = (60, _H - _H * 2.5 / 40.0)
-            copy = pygame.Surface(image.get_size())  # the frame's pixel format
-            copy.blit(image, (0, 0))
-            pixels = np.ascontiguousarray(pygame.surfarray.array2d(copy).T)
-            self._score_pixels = (text, pixels, rect.x, rect.y)
-        return self._score_pixels[1:]
+        kept = self._score_pixels.get(text)
+        if kept is not None:
+            return kept
+        if self._font is None:
+            self._font = pygame.font.Font(pygame.font.get_default_font(), 42)
+        image = self._font.render(text, True, (255, 255, 255), (0, 0, 0))
+        rect = image.get_rect()
+        rect.center = (60, _H - _H * 2.5 / 40.0)
+        copy = pygame.Surface(image.get_size())  # the frame's pixel format
+        copy.blit(image, (0, 0))
+        kept = (np.ascontiguousarray(pygame.surfarray.array2d(copy).T), rect.x, rect.y)
+        if len(self._score_pixels) < _SCORES_KEPT:
+            self._score_pixels[text] = kept
+        return kept
 
     def _plain_pixel(self, color) -> int | None:
         """The pixel gfxdraw writes for ``color`` if it is an opaque RGB colour; None if it would blend."""

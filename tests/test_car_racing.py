@@ -177,6 +177,24 @@ def test_a_road_poly_replaced_after_the_reset_is_drawn_from_its_colours_at_each_
     assert fast_env._observe_from_spans(fast_env._camera()) is not None
 
 
+def test_score_texts_are_kept_up_to_a_bound_and_drawn_alike_past_it(monkeypatch):
+    """The score's pixels are rendered once per text and kept for the environment's first texts only
+    (``_SCORES_KEPT``); a kept text, a new one past the bound and one seen again give the stock
+    observation."""
+    monkeypatch.setattr(car_racing, "_SCORES_KEPT", 4)
+    stock, fast = pair()
+    for env in (stock, fast):
+        env.reset(seed=5)
+    first = list(fast.unwrapped._score_pixels)  # the reset's frame
+    for reward in (0.0, -1.4, 12.0, 99.6, -7.0, 523.0, 12.0, 0.0, 523.0, -1.4):
+        for env in (stock, fast):
+            env.unwrapped.reward = reward
+        expected, got = stock.unwrapped._render("state_pixels"), fast.unwrapped._render("state_pixels")
+        assert np.array_equal(expected, got), f"reward {reward}"
+    seen = list(dict.fromkeys(first + ["0000", "-001", "0012", "0100", "-007", "0523"]))  # texts in order, once
+    assert list(fast.unwrapped._score_pixels) == seen[:4]
+
+
 def test_rgb_array_frames_skid_marks_included():
     rng = np.random.default_rng(16)
     actions = [np.array([rng.uniform(-1, 1), 1.0, 0.0 if step < 60 else 0.9], dtype=np.float32) for step in range(90)]
