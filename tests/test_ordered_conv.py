@@ -21,7 +21,7 @@ from tests.test_fast_conv import car_racing_frames
 
 torch = pytest.importorskip("torch")  # in requirements.txt
 RGB, HIDDEN, SIZE1, POOLED1, FULL2 = conv.RGB, conv.HIDDEN, conv.SIZE1, conv.POOLED1, conv.FULL2
-COLUMNS, SLACK = conv.COLUMNS, conv.SLACK
+COLUMNS, SLACK, WIDE1, WIDE2 = conv.COLUMNS, conv.SLACK, conv.WIDE1, conv.WIDE2
 SHAPES = conv_shapes(RGB)
 SIZES = [int(np.prod(shape)) for shape in SHAPES]
 NOT_HERE = "this CPU's torch sums its convolutions in another order: the default runs torch's own path"
@@ -58,19 +58,20 @@ def reference_rows(planes: np.ndarray, weights: np.ndarray, stride: int, rows: l
 
 
 def run_kernels(frame: np.ndarray, vector: np.ndarray, pooled: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """conv1 of ``frame`` and conv2 of ``pooled`` (6 x 41 x 41) through the ordered kernels and their flat,
-    slack-ended buffers (NaN where nothing should be left)."""
+    """conv1 of ``frame`` and conv2 of ``pooled`` (6 x 41 x 41) through the ordered kernels: the input
+    flat and slack-ended, the outputs flat with rows of WIDE1 and WIDE2 floats (NaN before: every used
+    output must be written)."""
     conv1, conv2 = (part.reshape(shape) for part, shape in zip(np.split(vector, [SIZES[0]]), SHAPES))
     flat_frame = np.zeros(frame.size + SLACK, np.float32)
     flat_frame[:frame.size] = frame.reshape(-1)
-    planes1 = np.full(HIDDEN * SIZE1 * SIZE1 + SLACK, np.nan, np.float32)
+    planes1 = np.full(HIDDEN * SIZE1 * WIDE1, np.nan, np.float32)  # rows WIDE1 long, SIZE1 of them used
     ordered_conv1(planes1, flat_frame, conv1)
     columns = np.zeros((HIDDEN, POOLED1, 2, COLUMNS), np.float32)  # split_columns' layout
     columns[:, :, 0, :(POOLED1 + 1) // 2], columns[:, :, 1, :POOLED1 // 2] = pooled[:, :, 0::2], pooled[:, :, 1::2]
-    planes2 = np.full(SHAPES[1][0] * FULL2 * FULL2 + SLACK, np.nan, np.float32)
+    planes2 = np.full(SHAPES[1][0] * FULL2 * WIDE2, np.nan, np.float32)
     ordered_conv2(planes2, columns.reshape(-1), conv2)
-    return (planes1[:-SLACK].reshape(HIDDEN, SIZE1, SIZE1),
-            planes2[:-SLACK].reshape(SHAPES[1][0], FULL2, FULL2))
+    return (planes1.reshape(HIDDEN, SIZE1, WIDE1)[:, :, :SIZE1],
+            planes2.reshape(SHAPES[1][0], FULL2, WIDE2)[:, :, :FULL2])
 
 
 def same_bits(a: np.ndarray, b: np.ndarray) -> bool:
