@@ -36,8 +36,8 @@ whole vectors wide (88 of 82 pixels, 24 of 19), into planes whose rows are that 
 reads the pixels used); the input buffers end in ``SLACK`` spare floats, which the last row's
 taps read past its end. Each pass computes the same row of several output planes (three for conv1,
 two for conv2), each input value loaded once for all of them: an output's multiply-adds depend
-each on the one before, and sums for other planes are work the CPU does while it waits (conv1 0.8x
-and conv2 0.7x the time of one plane per pass). (Where two NaNs with different payloads meet in
+each on the one before, and sums for other planes are work the CPU does while it waits (conv1 0.77x
+and conv2 0.65x the time of one plane per pass). (Where two NaNs with different payloads meet in
 one multiply-add, which payload comes out may differ from torch's; a NaN stays a NaN.)
 
 Pooling before tanh. A window's ``max_pool2`` of the tanh is the tanh of its ``max_pool2`` wherever
@@ -81,7 +81,8 @@ SIZE2 = FULL2 // 2 * 2  # 18 of conv2's 19: the rows and columns its pooling kee
 WIDE1, WIDE2 = 88, 24  # the ordered kernels' rows, whole vectors of 8 floats: 82 and 19 pixels used
 COLUMNS = 32  # the width of each half (even, odd columns) of the split pooled planes: 21 and 20 used
 SLACK = 8  # spare floats after each flat input buffer of the ordered path (a row's taps read 6 past its end)
-TOGETHER1, TOGETHER2 = 3, 2  # output planes per pass of ordered_conv1 and ordered_conv2
+TOGETHER1, TOGETHER2 = 3, 2  # output planes per pass of ordered_conv1 and ordered_conv2 (as many sums
+# as _conv1_rows and _conv2_rows write out)
 if HIDDEN % TOGETHER1 or OUTS2 % TOGETHER2:
     raise ValueError(f"the ordered kernels compute {TOGETHER1} and {TOGETHER2} planes at a time, not a part of "
                      f"{HIDDEN} and {OUTS2}")
