@@ -20,7 +20,9 @@ on both alike; the medians over rounds are printed.
   episodes, resets included; both classes must return the same fitness;
 - training loop, capped episodes: what a worker does for a trained agent, ``--length`` steps per
   episode (the early stop left out), reset, resize, network (and Hebbian update), action mapping
-  and ``env.step`` all timed, per step;
+  and ``env.step`` all timed, per step. By default a trained agent's whole episode, 1000 steps
+  (CarRacing's time limit): each episode's reset and zoom-in then weigh on its steps as they do in
+  the run projected;
 - the projection of the paper's Hebbian run (population 200, 300 generations, episodes of 1000
   steps) on 2 and 16 workers from the capped Hebbian loop's cost per step, as
   ``experiments/step_cost.py`` does: (popsize + 1) x 1000 x step / workers per generation;
@@ -202,8 +204,9 @@ def _pixel_chain(problem):
 
 
 def capped_loop_rates(kind: str, rounds: int, episodes: int, length: int,
-                      fast_conv: bool = False) -> tuple[list[float], list[float]]:
-    """Steps per CPU second of the capped training loop with each class, per round (resets counted);
+                      fast_conv: bool = False) -> tuple[list[float], list[float], float]:
+    """Steps per CPU second of the capped training loop with each class, per round (resets counted), and
+    the mean steps of an episode (fewer than ``length`` where the car leaves the playfield);
     ``fast_conv``: the fast class's network with ``--fast_conv`` (the stock class's with the default CNN)."""
     problems = [ProblemSpec((STOCK_ID,), PolicySettings(kind)).build(),
                 ProblemSpec((FAST_ID,), PolicySettings(kind, fast_conv=fast_conv)).build()]
@@ -211,6 +214,7 @@ def capped_loop_rates(kind: str, rounds: int, episodes: int, length: int,
     for problem in problems:
         capped_episode(problem, params, 0, 3)  # warm-up: compilation
     rates: list[list[float]] = [[], []]
+    run = 0
     try:
         for round_index in range(rounds):
             seconds, steps = [0.0, 0.0], [0, 0]
@@ -221,10 +225,11 @@ def capped_loop_rates(kind: str, rounds: int, episodes: int, length: int,
                     steps[index] += count
             for index in range(2):
                 rates[index].append(steps[index] / seconds[index])
+            run += steps[1]
     finally:
         for problem in problems:
             problem.close()
-    return rates[0], rates[1]
+    return rates[0], rates[1], run / (rounds * episodes)
 
 
 def loop_rates(kind: str, rounds: int, popsize: int) -> tuple[list[float], list[float], float]:
@@ -412,13 +417,14 @@ def paper_run_memory(workers: int, popsize: int) -> tuple[int, int, int]:
     return peak_pss, peak_uss, most
 
 
-def projection(step: tuple[float, float], label: str) -> None:
-    """The paper's Hebbian run's hours on 2 and 16 workers from (stock, fast) CPU seconds per capped step."""
+def projection(step: tuple[float, float], label: str, length: int) -> None:
+    """The paper's Hebbian run's hours on 2 and 16 workers from (stock, fast) CPU seconds per step of the
+    loop capped at ``length`` steps."""
     for workers in (2, 16):
         hours = [(PAPER_POPSIZE + 1) * FULL_EPISODE * seconds / workers * PAPER_GENERATIONS / 3600 for seconds in step]
         print(f"projection, the paper's Hebbian run (popsize {PAPER_POPSIZE}, {PAPER_GENERATIONS} generations, "
-              f"{FULL_EPISODE}-step episodes) on {workers} workers: stock {hours[0]:.1f} h, "
-              f"fast{label} {hours[1]:.1f} h")
+              f"{FULL_EPISODE}-step episodes) on {workers} workers, from the loop capped at {length} steps: "
+              f"stock {hours[0]:.1f} h, fast{label} {hours[1]:.1f} h")
 
 
 def summary(label: str, stock: list[float], fast: list[float], target: float | None = None,
@@ -437,8 +443,9 @@ def main() -> int:
     parser.add_argument("--phase_episodes", type=positive_int, default=6,
                         help="episodes of env.step timed by step of the episode (the zoom-in first)")
     parser.add_argument("--popsize", type=positive_int, default=8, help="episodes per generation-0 training-loop round")
-    parser.add_argument("--episodes", type=positive_int, default=2, help="capped episodes per training-loop round")
-    parser.add_argument("--length", type=positive_int, default=300, help="steps of a capped episode")
+    parser.add_argument("--episodes", type=positive_int, default=1, help="capped episodes per training-loop round")
+    parser.add_argument("--length", type=positive_int, default=FULL_EPISODE,
+                        help="steps of a capped episode (the projection's cost per step)")
     parser.add_argument("--share_steps", type=positive_int, default=600, help="steps measured for the policy's share")
     parser.add_argument("--memory", action="store_true", help="also measure the paper's Hebbian run's memory")
     parser.add_argument("--fast_conv", action="store_true",
@@ -460,17 +467,17 @@ def main() -> int:
         summary(f"training loop, generation 0, {kind} (mean episode {length:.0f} steps)", stock, fast)
     hebbian_step = None
     for kind in ("static", "hebbian"):
-        stock, fast = capped_loop_rates(kind, args.rounds, args.episodes, args.length)
-        summary(f"training loop, episodes capped at {args.length} steps, {kind}", stock, fast,
+        stock, fast, run = capped_loop_rates(kind, args.rounds, args.episodes, args.length)
+        summary(f"training loop, episodes capped at {args.length} steps (mean {run:.0f} run), {kind}", stock, fast,
                 LOOP_TARGET if kind == "hebbian" else None)
         if kind == "hebbian":
             hebbian_step = (1 / statistics.median(stock), 1 / statistics.median(fast))
-    projection(hebbian_step, "")
+    projection(hebbian_step, "", args.length)
     if args.fast_conv:
-        stock, fast = capped_loop_rates("hebbian", args.rounds, args.episodes, args.length, fast_conv=True)
-        summary(f"training loop, episodes capped at {args.length} steps, hebbian, the fast class with --fast_conv "
-                "against the stock class with the default CNN", stock, fast, LOOP_TARGET)
-        projection((1 / statistics.median(stock), 1 / statistics.median(fast)), " with --fast_conv")
+        stock, fast, run = capped_loop_rates("hebbian", args.rounds, args.episodes, args.length, fast_conv=True)
+        summary(f"training loop, episodes capped at {args.length} steps (mean {run:.0f} run), hebbian, the fast "
+                "class with --fast_conv against the stock class with the default CNN", stock, fast, LOOP_TARGET)
+        projection((1 / statistics.median(stock), 1 / statistics.median(fast)), " with --fast_conv", args.length)
     print("the default CNN, in every loop above: " + ("torch's bits through the ordered kernels (policies.conv)"
                                                        if torch_order_holds() else "torch's path"))
     for kind in ("static", "hebbian"):
