@@ -206,7 +206,7 @@ def _pixel_chain(problem):
 def capped_loop_rates(kind: str, rounds: int, episodes: int, length: int,
                       fast_conv: bool = False) -> tuple[list[float], list[float], float]:
     """Steps per CPU second of the capped training loop with each class, per round (resets counted), and
-    the mean steps of an episode (fewer than ``length`` where the car leaves the playfield);
+    the fast class's mean steps per episode (fewer than ``length`` where the car leaves the playfield);
     ``fast_conv``: the fast class's network with ``--fast_conv`` (the stock class's with the default CNN)."""
     problems = [ProblemSpec((STOCK_ID,), PolicySettings(kind)).build(),
                 ProblemSpec((FAST_ID,), PolicySettings(kind, fast_conv=fast_conv)).build()]
@@ -214,7 +214,7 @@ def capped_loop_rates(kind: str, rounds: int, episodes: int, length: int,
     for problem in problems:
         capped_episode(problem, params, 0, 3)  # warm-up: compilation
     rates: list[list[float]] = [[], []]
-    run = 0
+    fast_steps = 0
     try:
         for round_index in range(rounds):
             seconds, steps = [0.0, 0.0], [0, 0]
@@ -225,11 +225,11 @@ def capped_loop_rates(kind: str, rounds: int, episodes: int, length: int,
                     steps[index] += count
             for index in range(2):
                 rates[index].append(steps[index] / seconds[index])
-            run += steps[1]
+            fast_steps += steps[1]  # (the stock class's are the same steps, but with --fast_conv's network)
     finally:
         for problem in problems:
             problem.close()
-    return rates[0], rates[1], run / (rounds * episodes)
+    return rates[0], rates[1], fast_steps / (rounds * episodes)
 
 
 def loop_rates(kind: str, rounds: int, popsize: int) -> tuple[list[float], list[float], float]:
@@ -465,18 +465,18 @@ def main() -> int:
     for kind in ("static", "hebbian"):
         stock, fast, length = loop_rates(kind, args.rounds, args.popsize)
         summary(f"training loop, generation 0, {kind} (mean episode {length:.0f} steps)", stock, fast)
-    hebbian_step = None
+    hebbian_step, capped = None, f"training loop, episodes capped at {args.length} steps"
     for kind in ("static", "hebbian"):
-        stock, fast, run = capped_loop_rates(kind, args.rounds, args.episodes, args.length)
-        summary(f"training loop, episodes capped at {args.length} steps (mean {run:.0f} run), {kind}", stock, fast,
+        stock, fast, mean_steps = capped_loop_rates(kind, args.rounds, args.episodes, args.length)
+        summary(f"{capped} ({mean_steps:.0f} on average), {kind}", stock, fast,
                 LOOP_TARGET if kind == "hebbian" else None)
         if kind == "hebbian":
             hebbian_step = (1 / statistics.median(stock), 1 / statistics.median(fast))
     projection(hebbian_step, "", args.length)
     if args.fast_conv:
-        stock, fast, run = capped_loop_rates("hebbian", args.rounds, args.episodes, args.length, fast_conv=True)
-        summary(f"training loop, episodes capped at {args.length} steps (mean {run:.0f} run), hebbian, the fast "
-                "class with --fast_conv against the stock class with the default CNN", stock, fast, LOOP_TARGET)
+        stock, fast, mean_steps = capped_loop_rates("hebbian", args.rounds, args.episodes, args.length, fast_conv=True)
+        summary(f"{capped} ({mean_steps:.0f} on average), hebbian, the fast class with --fast_conv against the "
+                "stock class with the default CNN", stock, fast, LOOP_TARGET)
         projection((1 / statistics.median(stock), 1 / statistics.median(fast)), " with --fast_conv", args.length)
     print("the default CNN, in every loop above: " + ("torch's bits through the ordered kernels (policies.conv)"
                                                        if torch_order_holds() else "torch's path"))
