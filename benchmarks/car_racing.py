@@ -66,7 +66,6 @@ from envs.wrappers import CarRacingAction, PixelObservation
 from es.backends import Generation, SerialEvaluator
 from es.noise import NoiseTable
 from policies import PolicySettings
-from policies.conv import torch_order_holds
 
 FAST_ID = "CarRacing-v3"
 ENV_TARGET, RESET_TARGET, LOOP_TARGET = 8.0, 2.5, 5.0
@@ -273,7 +272,7 @@ def policy_share(kind: str, steps: int) -> dict[str, float]:
     pixels, squash, env = _pixel_chain(problem)  # env: the fast class with Gymnasium's own wrappers
     policy = problem.policy
     params = policy.initial_params(np.random.default_rng(0))
-    frame, _ = env.reset(seed=0)  # untimed warm-up: numba's kernels, torch's first convolution
+    frame, _ = env.reset(seed=0)  # untimed warm-up: numba's kernels
     policy.act(params, policy.reset(params, np.random.default_rng(0)), pixels.observation(frame))
     totals = {"env.step": 0.0, "resize": 0.0, "network": 0.0}
     done, seed = 0, 0
@@ -478,8 +477,6 @@ def main() -> int:
         summary(f"{capped} ({mean_steps:.0f} on average), hebbian, the fast class with --fast_conv against the "
                 "stock class with the default CNN", stock, fast, LOOP_TARGET)
         projection((1 / statistics.median(stock), 1 / statistics.median(fast)), " with --fast_conv", args.length)
-    print("the default CNN, in every loop above: " + ("torch's bits through the ordered kernels (policies.conv)"
-                                                       if torch_order_holds() else "torch's path"))
     for kind in ("static", "hebbian"):
         parts = policy_share(kind, args.share_steps)
         total = sum(parts.values())

@@ -1,19 +1,16 @@
 #!/usr/bin/env python
-"""The pixel CNN: torch's path, the default (torch's bits through the ordered kernels where they give them)
-and ``--fast_conv``'s compiled pass (issue 21, item 3), in one run.
+"""The pixel CNN: the original's as torch computes it, the default (``policies.conv``'s ordered kernels and
+the project's tanh) and ``--fast_conv``'s compiled pass, in one run.
 
     python benchmarks/fast_conv.py
 
 - per frame: the three paths on the same real CarRacing-v3 observations and the same weights, one
   thread, CPU time of this process, alternating round by round; the medians over ``--rounds``; and
-  whether the default's features equal torch's path's on every frame;
+  whether two instances of the default give the same bits on every frame;
 - the features: the largest difference between the two paths on those frames, for PyTorch's default
   initialisation (the static network's generation 0) and N(0, 1) (the Hebbian network's CNN);
-- tanh: the largest error of the compiled pass's rational tanh against ``math.tanh`` (double), and
-  whether it is non-decreasing, over every ``--tanh_every``-th float32 of [0, 8] (1: all of them);
-  and whether torch's tanh, over every ``--tanh_every``-th float32 of either sign (1: all 2^32), is
-  what the default's pooling before it needs (``policies.conv``: non-decreasing, zero only at zero,
-  of its input's sign, odd);
+- tanh: the largest error of the project's rational tanh against ``math.tanh`` (double), and how
+  often it steps down, over every ``--tanh_every``-th float32 of [0, 8] (1: all of them);
 - outputs: the static and the Hebbian networks' outputs on those frames, in order, with and without it;
 - returns: one static and one Hebbian parameter vector (generation-0 draws, fixed seeds) evaluated
   with and without the flag on the same ``--episodes`` seeds, episodes capped at ``--steps``.
@@ -36,7 +33,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from cli.flags import positive_int
 from envs import ProblemSpec, rollout
 from policies import PolicySettings
-from policies.conv import ConvFeatures, rational_tanh, tanh_faults
+from policies.conv import ConvFeatures
+from policies.elementary import rational_tanh
 from policies.init import default_init
 from policies.network import Layout, conv_shapes
 
@@ -68,7 +66,27 @@ def conv_weights(kind: str, seed: int) -> np.ndarray:
     return default_init(layout, rng, {name: int(np.prod(part.shape[1:])) for name, part in layout.parts.items()})
 
 
-def per_frame(features: ConvFeatures, frames: list[np.ndarray]) -> float:
+class TorchCNN:
+    """The original's CNN as torch computes it: conv2d, tanh, max_pool2d, twice (one thread)."""
+
+    def __init__(self, weights: np.ndarray):
+        import torch
+
+        torch.set_num_threads(1)
+        self.torch = torch
+        split = int(np.prod(SHAPES[0]))
+        self.conv1 = torch.from_numpy(weights[:split].reshape(SHAPES[0]).copy())
+        self.conv2 = torch.from_numpy(weights[split:].reshape(SHAPES[1]).copy())
+
+    def __call__(self, frame: np.ndarray) -> np.ndarray:
+        functional = self.torch.nn.functional
+        with self.torch.inference_mode():
+            x = self.torch.from_numpy(np.ascontiguousarray(frame, dtype=np.float32))[None]
+            hidden = functional.max_pool2d(functional.conv2d(x, self.conv1).tanh(), 2)
+            return functional.max_pool2d(functional.conv2d(hidden, self.conv2, stride=2).tanh(), 2).reshape(-1).numpy()
+
+
+def per_frame(features, frames: list[np.ndarray]) -> float:
     start = time.process_time()
     for frame in frames:
         features(frame)
@@ -77,28 +95,32 @@ def per_frame(features: ConvFeatures, frames: list[np.ndarray]) -> float:
 
 def speed(frames: list[np.ndarray], rounds: int) -> None:
     weights = conv_weights("default", 1)
-    paths = {"torch": ConvFeatures(weights, SHAPES, ordered=False), "default": ConvFeatures(weights, SHAPES),
+    paths = {"torch": TorchCNN(weights), "default": ConvFeatures(weights, SHAPES),
              "fast": ConvFeatures(weights, SHAPES, fast=True)}
     for features in paths.values():
         per_frame(features, frames[:1])  # compiled (or loaded from numba's cache) before timing
-    same = all(np.array_equal(paths["default"](frame).view(np.uint32), paths["torch"](frame).view(np.uint32))
+    again = ConvFeatures(weights, SHAPES)
+    same = all(np.array_equal(paths["default"](frame).view(np.uint32), again(frame).view(np.uint32))
                for frame in frames)
     times: dict[str, list[float]] = {name: [] for name in paths}
     for _ in range(rounds):
         for name, features in paths.items():
             times[name].append(per_frame(features, frames))
     torch_us, default_us, fast_us = (statistics.median(times[name]) * 1e6 for name in paths)
-    print(f"per frame ({len(frames)} CarRacing frames, median of {rounds} rounds): torch's path {torch_us:.0f} us; "
-          f"the default ({paths['default'].path}) {default_us:.0f} us, {torch_us / default_us:.2f}x, torch's bits on "
-          f"every frame: {same}; --fast_conv {fast_us:.0f} us, {torch_us / fast_us:.2f}x")
+    print(f"per frame ({len(frames)} CarRacing frames, median of {rounds} rounds): torch {torch_us:.0f} us; "
+          f"the default ({paths['default'].path}) {default_us:.0f} us, {torch_us / default_us:.2f}x, the same bits "
+          f"twice on every frame: {same}; --fast_conv {fast_us:.0f} us, {torch_us / fast_us:.2f}x")
 
 
 def differences(frames: list[np.ndarray]) -> None:
     for kind in ("default", "normal"):
         weights = conv_weights(kind, 2)
-        torch_path, fast = ConvFeatures(weights, SHAPES, ordered=False), ConvFeatures(weights, SHAPES, fast=True)
-        largest = max(float(np.abs(torch_path(frame) - fast(frame)).max()) for frame in frames)
-        print(f"features, {kind} weights: largest |torch - fast| over {len(frames)} frames {largest:.2e}")
+        paths = TorchCNN(weights), ConvFeatures(weights, SHAPES), ConvFeatures(weights, SHAPES, fast=True)
+        torch_path, default, fast = paths
+        largest = max(float(np.abs(torch_path(frame) - default(frame)).max()) for frame in frames)
+        fast_largest = max(float(np.abs(default(frame) - fast(frame)).max()) for frame in frames)
+        print(f"features, {kind} weights, over {len(frames)} frames: largest |torch - default| {largest:.2e}, "
+              f"|default - fast| {fast_largest:.2e}")
 
 
 @njit(cache=True)
@@ -126,22 +148,6 @@ def tanh_error(every: int) -> tuple[float, float, float, float, int]:
     return largest, at, largest_ulp, at_ulp, decreases
 
 
-def torch_tanh_pools_first(every: int, chunk: int = 1 << 24) -> dict[str, int]:
-    """``policies.conv.tanh_faults`` of torch's tanh over every ``every``-th float32 from +0 to +inf and their
-    negatives, a chunk at a time, each chunk starting at the last float of the one before (so a step down
-    between chunks counts)."""
-    import torch
-
-    found: dict[str, int] = {}
-    top = int(np.float32(np.inf).view(np.uint32))
-    for start in range(0, top + 1, chunk * every):
-        first = max(start - every, 0)
-        x = np.arange(first, min(start + chunk * every, top + 1), every, dtype=np.uint32).view(np.float32)
-        for name, count in tanh_faults(torch, x).items():
-            found[name] = found.get(name, 0) + count
-    return found
-
-
 def actions(frames: list[np.ndarray]) -> None:
     """The networks' outputs on the same sequence of frames, with and without the flag (the Hebbian
     network's weights change along it, so differences could grow)."""
@@ -156,7 +162,7 @@ def actions(frames: list[np.ndarray]) -> None:
                 outputs.append(np.array([policy.act(params, state, frame)[0].copy() for frame in frames]))
             finally:
                 problem.close()
-        print(f"{kind} network's outputs over the {len(frames)} frames: largest |torch - fast| "
+        print(f"{kind} network's outputs over the {len(frames)} frames: largest |default - fast| "
               f"{np.abs(outputs[0] - outputs[1]).max():.2e} (outputs up to {np.abs(outputs[0]).max():.2f})")
 
 
@@ -172,7 +178,7 @@ def returns(episodes: int, steps: int) -> None:
             finally:
                 problem.close()
         print(f"{kind}, {episodes} episodes of up to {steps} steps, seeds 0..{episodes - 1}, return (steps):")
-        for name, episodes_run in zip(("torch", "fast"), line, strict=True):
+        for name, episodes_run in zip(("default", "fast"), line, strict=True):
             print(f"  {name:6}" + " ".join(f"{episode.total_return:.4f} ({episode.steps})" for episode in episodes_run))
         largest = max(abs(a.total_return - b.total_return) for a, b in zip(*line, strict=True))
         print(f"  largest |difference| {largest:.2e}")
@@ -185,8 +191,7 @@ def main() -> None:
     parser.add_argument("--episodes", type=positive_int, default=3, help="episodes per network and path")
     parser.add_argument("--steps", type=positive_int, default=300, help="the episodes' cap")
     parser.add_argument("--tanh_every", type=positive_int, default=64,
-                        help="1: every float32 of [0, 8] for the rational tanh (about a minute) and all 2^32 for "
-                             "torch's (about a minute)")
+                        help="1: every float32 of [0, 8] for the rational tanh (about a minute)")
     args = parser.parse_args()
     frames = observations(args.frames)
     speed(frames, args.rounds)
@@ -195,11 +200,6 @@ def main() -> None:
     checked = "every float32" if args.tanh_every == 1 else f"every {args.tanh_every}th float32"
     print(f"tanh on {checked} of [0, 8]: largest error {largest:.2e} (at x = {at:.6g}), {ulps:.1f} ulp "
           f"(at x = {at_ulp:.6g}); decreasing steps: {decreases}")
-    found = torch_tanh_pools_first(args.tanh_every)
-    verdict = ("pooling before it would not give torch's bits" if any(found.values())
-               else "pooling before it gives torch's bits" if args.tanh_every == 1 else "none found")
-    print(f"torch's tanh on {checked} of either sign: "
-          + ", ".join(f"{name} {count}" for name, count in found.items()) + f": {verdict}")
     actions(frames)
     returns(args.episodes, args.steps)
 

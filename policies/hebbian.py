@@ -24,7 +24,6 @@ import numpy as np
 
 from policies.base import Policy
 from policies.conv import ConvFeatures
-from policies.conv import worker_modules as conv_modules
 from policies.init import COEVOLVE, INIT_CHOICES, sample_weights
 from policies.kernels import hebbian_forward_update
 from policies.network import Layout, NetworkSpec, from_kernel_layout, to_kernel_layout
@@ -68,7 +67,6 @@ class HebbianPolicy(Policy):
         self.init_weights = init_weights
         self.normalise = normalise
         self.fast_conv = fast_conv  # the CNN's compiled pass (policies.conv)
-        self.worker_modules = conv_modules(net, fast_conv)
         n_syn, k = net.n_synapses, self.rule.n_coeffs
         parts: list[tuple[str, tuple[int, ...]]] = [("coefficients", (n_syn, k))]
         if init_weights == COEVOLVE:

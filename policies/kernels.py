@@ -29,32 +29,15 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-_FLAGS = dict(fastmath=True, cache=True, nogil=True)
+from policies.elementary import rational_tanh
+
+# No fastmath: every sum is evaluated in the order written here, with one rounding per operation,
+# whatever the CPU's vector width or its fused multiply-add (docs/reproducibility.md). The loops
+# vectorise across independent outputs (a layer's units, a row's synapses), never inside one sum.
+# numpy's error model: a division by zero gives IEEE's inf or NaN instead of a Python check, which
+# would stop vectorisation.
+_FLAGS = dict(cache=True, nogil=True, error_model="numpy")
 _ABS_BITS = np.uint32(0x7FFFFFFF)
-
-
-# tanh as a rational function (the minimax form Eigen and XLA use for float32), clamped where
-# tanh rounds to +-1 in float32: within 4.4 ulp (2.6e-7 absolute) of the exact value over all
-# float32 inputs, and, unlike a call to exp or tanh, it vectorises.
-_TANH_CLAMP = np.float32(7.90531110763549805)
-_TANH_P = tuple(np.float32(c) for c in (-2.76076847742355e-16, 2.00018790482477e-13, -8.60467152213735e-11,
-                                        5.12229709037114e-08, 1.48572235717979e-05, 6.37261928875436e-04,
-                                        4.89352455891786e-03))
-_TANH_Q = tuple(np.float32(c) for c in (1.19825839466702e-06, 1.18534705686654e-04, 2.26843463243900e-03,
-                                        4.89352518554385e-03))
-
-
-@njit(**_FLAGS)
-def _tanh(x):
-    x = min(max(x, -_TANH_CLAMP), _TANH_CLAMP)
-    x2 = x * x
-    p = _TANH_P[0]
-    for c in _TANH_P[1:]:
-        p = p * x2 + c
-    q = _TANH_Q[0]
-    for c in _TANH_Q[1:]:
-        q = q * x2 + c
-    return x * p / q
 
 
 @njit(**_FLAGS)
@@ -69,7 +52,7 @@ def _dense(weights_t, pre, post, scale, squash):
             post[j] += row[j] * activity
     if squash:  # two loops rather than a branch inside one: each vectorises
         for j in range(n_out):
-            post[j] = _tanh(post[j] * scale)
+            post[j] = rational_tanh(post[j] * scale)
     else:
         for j in range(n_out):
             post[j] *= scale
@@ -105,8 +88,6 @@ def _plastic(weights_t, folded, pre, post, scale, squash, normalise):
             row[j] = row[j] * scale + (a[j] * post[j] + b[j]) * activity + (c[j] * post[j] + d[j])
         if normalise:  # the row's largest |w| while it is in the cache: a pass over the whole layer
             largest = _largest_bits(bits[i], largest)  # afterwards cost ~17 us more in CarRacing's loop
-        # (the max inside the update loop was faster, but under fastmath it changed how LLVM compiled
-        # the update, and so its bits: the pinned hashes moved)
     one = np.float32(1.0)
     if not normalise:
         return one

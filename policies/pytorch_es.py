@@ -12,9 +12,13 @@ default static network, and saved the same way (one flat ``.dat`` vector, the or
   6 -> 3), flattened to 288, LSTMCell(288, 256), Linear(256, actions): 588 710 parameters on Pong.
   Its hidden and cell state are the policy state: zeros at every ``reset``, carried by ``act``, so
   the rollout does not know the network is recurrent. Compiled kernels (im2col and products for the
-  convs, one pass over [W_ih | W_hh] for the gates) and numpy's vectorised exp for selu,
-  single-threaded, on preallocated buffers: a few times faster than torch's eager conv2d and
-  lstm_cell on these small sizes.
+  convs, one pass over [W_ih | W_hh] for the gates), single-threaded, on preallocated buffers: a few
+  times faster than torch's eager conv2d and lstm_cell on these small sizes.
+
+Every sum runs in the order PyTorch's formulas write it (the bias, then the inputs in order), with no
+fastmath, and vectorises across a layer's outputs (the weights are transposed once per episode), never
+inside one sum; exp, tanh and the sigmoid are ``policies.elementary``'s. So the numbers are the same on
+every machine (docs/reproducibility.md), within a few float32 ulps of torch's.
 
 The flat vector is the networks' ``state_dict`` order (each tensor C-order), as pytorch-es's
 ``es_params`` listed them, and each part starts at PyTorch's default initialisation, as pytorch-es
@@ -29,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from policies.elementary import exp32, rational_tanh, sigmoid32
 from policies.init import default_init
 from policies.network import Layout, NetworkSpec
 from policies.static import WeightFile
@@ -39,39 +44,50 @@ SMALL_HIDDEN = 64
 CONV_CHANNELS = 32
 CONV_LAYERS = 4
 LSTM_HIDDEN = 256
-SHORT_PATCH = 32  # conv patches shorter than this (the first layer's 9) are laid out position-major
 
 
 # --- the small net -------------------------------------------------------------------------------
 
 
-@njit(fastmath=True, cache=True, nogil=True)
-def _selu_layer(weights, bias, pre, post, selu):
-    """post = selu(W @ pre + b) (or without selu), W in PyTorch's (out, in) orientation."""
-    for j in range(weights.shape[0]):
-        total = bias[j]
-        row = weights[j]
-        for i in range(weights.shape[1]):
-            total += row[i] * pre[i]
-        if selu:
-            total = SELU_SCALE * total if total > 0 else SELU_SCALE * SELU_ALPHA * np.expm1(total)
-        post[j] = total
+_FLAGS = dict(cache=True, nogil=True, error_model="numpy")  # no fastmath: the sums in the order written
 
 
-@njit(fastmath=True, cache=True, nogil=True)
+@njit(inline="always")
+def _selu(x: np.float32) -> np.float32:
+    """selu(x) = scale * x for x > 0, scale * alpha * (exp(x) - 1) otherwise."""
+    negative = SELU_SCALE * SELU_ALPHA * (exp32(min(x, np.float32(0.0))) - np.float32(1.0))
+    return SELU_SCALE * x if x > 0 else negative
+
+
+@njit(**_FLAGS)
+def _selu_layer(weights_t, bias, pre, post, selu):
+    """post = selu(W @ pre + b) (or without selu), ``weights_t`` = W^T (in, out): post[j] = b[j] + W[j, 0] pre[0]
+    + W[j, 1] pre[1] + ..., summed in that order, the outputs side by side."""
+    post[:] = bias
+    for i in range(weights_t.shape[0]):
+        activity, row = pre[i], weights_t[i]
+        for j in range(post.shape[0]):
+            post[j] += row[j] * activity
+    if selu:
+        for j in range(post.shape[0]):
+            post[j] = _selu(post[j])
+
+
+@njit(**_FLAGS)
 def small_forward(w1, b1, w2, b2, w3, b3, obs, h1, h2, out, squash_out):
+    """The small net, its weights transposed (in, out)."""
     x = obs.astype(np.float32)
     _selu_layer(w1, b1, x, h1, True)
     _selu_layer(w2, b2, h1, h2, True)
     _selu_layer(w3, b3, h2, out, False)
     if squash_out:
         for j in range(out.shape[0]):
-            out[j] = np.tanh(out[j])
+            out[j] = rational_tanh(out[j])
 
 
 @dataclass
 class SmallNetState:
-    layers: tuple[np.ndarray, ...]  # w1, b1, w2, b2, w3, b3 (views of the parameters)
+    layers: tuple[np.ndarray, ...]  # w1, b1, w2, b2, w3, b3: the weights transposed (in, out), the biases views
     h1: np.ndarray
     h2: np.ndarray
     out: np.ndarray
@@ -96,7 +112,7 @@ class SmallNetPolicy(WeightFile):
 
     def reset(self, params: np.ndarray, rng: np.random.Generator | None = None) -> SmallNetState:
         params = np.ascontiguousarray(params, dtype=np.float32)
-        layers = tuple(self.layout.view(params, name) for name in self.layout.parts)
+        layers = tuple(np.ascontiguousarray(self.layout.view(params, name).T) for name in self.layout.parts)
         return SmallNetState(layers, np.empty(SMALL_HIDDEN, np.float32), np.empty(SMALL_HIDDEN, np.float32),
                              np.empty(self.net.n_actions, np.float32))
 
@@ -114,102 +130,69 @@ def conv_output(size: int) -> int:
     return (size + 2 - 3) // 2 + 1
 
 
-@njit(fastmath=True, cache=True, nogil=True)
+@njit(**_FLAGS)
 def conv_layer(image, padded, weights, bias, patches, out):
-    """Conv2d(k 3, stride 2, padding 1) of a flat (channels, height, width) image, as im2col and a product.
+    """Conv2d(k 3, stride 2, padding 1) + selu of a flat (channels, height, width) image, as im2col and a product.
 
     ``padded`` (channels, height + 2, width + 2) has a zero border and gets the image inside it;
-    ``patches`` each output position's input patch, as (positions, channels * 9), or, for patches
-    shorter than ``SHORT_PATCH``, as (channels * 9, positions); ``out`` (32, positions) the result.
-    The product runs along the patch, or along the positions for short patches: either way the inner
-    loop is long and contiguous.
+    ``patches`` each output position's input patch, as (channels * 9, positions); ``out`` (32, positions)
+    the result. Each output is its bias plus the patch's products in order; the product's inner loop runs
+    along the positions: long, contiguous, and across independent outputs.
     """
     channels, padded_height, padded_width = padded.shape
     height, width = padded_height - 2, padded_width - 2
     padded[:, 1:height + 1, 1:width + 1] = image.reshape(channels, height, width)
     out_width, positions = conv_output(width), out.shape[1]
-    short = channels * 9 < SHORT_PATCH
     for position in range(positions):
         top, left = 2 * (position // out_width), 2 * (position % out_width)
         for channel in range(channels):
             for ki in range(3):
                 for kj in range(3):
-                    k = (channel * 3 + ki) * 3 + kj
-                    if short:
-                        patches[k, position] = padded[channel, top + ki, left + kj]
-                    else:
-                        patches[position, k] = padded[channel, top + ki, left + kj]
-    if short:
-        for filter_ in range(out.shape[0]):
-            out[filter_, :] = bias[filter_]
-            for k in range(patches.shape[0]):
-                weight, patch = weights[filter_, k], patches[k]
-                for position in range(positions):
-                    out[filter_, position] += weight * patch[position]
-        return
+                    patches[(channel * 3 + ki) * 3 + kj, position] = padded[channel, top + ki, left + kj]
     for filter_ in range(out.shape[0]):
-        row = weights[filter_]
-        for position in range(out.shape[1]):
-            patch = patches[position]
-            total = bias[filter_]
-            for k in range(row.shape[0]):
-                total += row[k] * patch[k]
-            out[filter_, position] = total
+        row = out[filter_]
+        row[:] = bias[filter_]
+        for k in range(patches.shape[0]):
+            weight, patch = weights[filter_, k], patches[k]
+            for position in range(positions):
+                row[position] += weight * patch[position]
+        for position in range(positions):
+            row[position] = _selu(row[position])
 
 
-@njit(fastmath=True, cache=True, nogil=True)
-def finish_selu(values, exp_negative):
-    """selu(x) = scale * (max(x, 0) + alpha * (exp(min(x, 0)) - 1)), given ``exp_negative`` = exp(min(x, 0))."""
-    flat, exponentials = values.ravel(), exp_negative.ravel()
-    for k in range(flat.shape[0]):
-        flat[k] = SELU_SCALE * (max(flat[k], np.float32(0.0)) + SELU_ALPHA * (exponentials[k] - np.float32(1.0)))
-
-
-def selu_(values: np.ndarray, work: np.ndarray) -> None:
-    """selu in place; numpy's exp is vectorised (SIMD), a per-element exp or expm1 is ten times slower."""
-    np.minimum(values, 0.0, out=work)
-    np.exp(work, out=work)
-    finish_selu(values, work)
-
-
-@njit(fastmath=True, cache=True, nogil=True)
-def _sigmoid(x):
-    return 1.0 / (1.0 + np.exp(-x))
-
-
-@njit(fastmath=True, cache=True, nogil=True)
-def lstm_step(lstm_weights, lstm_bias, inputs, cell, gates, actor_weights, actor_bias, out, squash_out):
-    """The LSTM cell (PyTorch's gate order i, f, g, o; ``inputs`` = [features | hidden], ``lstm_weights`` =
-    [W_ih | W_hh], ``lstm_bias`` = b_ih + b_hh), its new hidden state written into ``inputs``, then the head."""
+@njit(**_FLAGS)
+def lstm_step(lstm_weights_t, lstm_bias, inputs, cell, gates, actor_weights, actor_bias, out, squash_out):
+    """The LSTM cell (PyTorch's gate order i, f, g, o; ``inputs`` = [features | hidden], ``lstm_weights_t`` =
+    [W_ih | W_hh]^T (inputs, gates), ``lstm_bias`` = b_ih + b_hh), its new hidden state written into
+    ``inputs``, then the head. Each gate is its bias plus the inputs' products in order, the gates side by side."""
     hidden = cell.shape[0]
     n_features = inputs.shape[0] - hidden
-    for gate in range(gates.shape[0]):
-        total, row = lstm_bias[gate], lstm_weights[gate]
-        for k in range(inputs.shape[0]):
-            total += row[k] * inputs[k]
-        gates[gate] = total
+    gates[:] = lstm_bias
+    for k in range(inputs.shape[0]):
+        activity, row = inputs[k], lstm_weights_t[k]
+        for gate in range(gates.shape[0]):
+            gates[gate] += row[gate] * activity
     for unit in range(hidden):
-        cell[unit] = (_sigmoid(gates[hidden + unit]) * cell[unit]
-                      + _sigmoid(gates[unit]) * np.tanh(gates[2 * hidden + unit]))
-        inputs[n_features + unit] = _sigmoid(gates[3 * hidden + unit]) * np.tanh(cell[unit])
+        cell[unit] = (sigmoid32(gates[hidden + unit]) * cell[unit]
+                      + sigmoid32(gates[unit]) * rational_tanh(gates[2 * hidden + unit]))
+        inputs[n_features + unit] = sigmoid32(gates[3 * hidden + unit]) * rational_tanh(cell[unit])
     for action in range(out.shape[0]):
         total, row = actor_bias[action], actor_weights[action]
         for unit in range(hidden):
             total += row[unit] * inputs[n_features + unit]
-        out[action] = np.tanh(total) if squash_out else total
+        out[action] = rational_tanh(total) if squash_out else total
 
 
 @dataclass
 class LSTMState:
     conv_weights: tuple[np.ndarray, ...]  # (32, channels * 9) each: views of the parameters
     conv_biases: tuple[np.ndarray, ...]
-    lstm_weights: np.ndarray  # (1024, features + 256): [W_ih | W_hh]
+    lstm_weights: np.ndarray  # (features + 256, 1024): [W_ih | W_hh]^T
     lstm_bias: np.ndarray  # b_ih + b_hh
     actor: tuple[np.ndarray, np.ndarray]
     padded: tuple[np.ndarray, ...]  # work buffers of the conv layers: zero-bordered inputs,
     columns: tuple[np.ndarray, ...]  # patches (see conv_layer),
-    features: tuple[np.ndarray, ...]  # outputs,
-    exponentials: tuple[np.ndarray, ...]  # exp(min(output, 0)) for selu
+    features: tuple[np.ndarray, ...]  # outputs
     inputs: np.ndarray  # [conv features | hidden state]: the hidden state is inputs[features:]
     cell: np.ndarray
     gates: np.ndarray
@@ -250,19 +233,18 @@ class ConvLSTMPolicy(WeightFile):
         conv_weights = tuple(view(params, f"conv{index}.weight").reshape(CONV_CHANNELS, -1)
                              for index in range(1, CONV_LAYERS + 1))
         conv_biases = tuple(view(params, f"conv{index}.bias") for index in range(1, CONV_LAYERS + 1))
-        lstm_weights = np.concatenate([view(params, "lstm.weight_ih"), view(params, "lstm.weight_hh")], axis=1)
+        lstm_weights = np.ascontiguousarray(
+            np.concatenate([view(params, "lstm.weight_ih"), view(params, "lstm.weight_hh")], axis=1).T)
         lstm_bias = view(params, "lstm.bias_ih") + view(params, "lstm.bias_hh")
         positions = [conv_output(height) * conv_output(width) for _, height, width in self.shapes]
-        columns = tuple(np.zeros((channels * 9, size) if channels * 9 < SHORT_PATCH else (size, channels * 9),
-                                 np.float32)
+        columns = tuple(np.zeros((channels * 9, size), np.float32)
                         for (channels, _, _), size in zip(self.shapes, positions))
         features = tuple(np.zeros((CONV_CHANNELS, size), np.float32) for size in positions)
-        exponentials = tuple(np.zeros_like(layer) for layer in features)
         padded = tuple(np.zeros((channels, height + 2, width + 2), np.float32)
                        for channels, height, width in self.shapes)
         return LSTMState(conv_weights, conv_biases, lstm_weights, lstm_bias,
                          (view(params, "actor_linear.weight"), view(params, "actor_linear.bias")), padded, columns,
-                         features, exponentials,
+                         features,
                          np.zeros(self.features + LSTM_HIDDEN, np.float32), np.zeros(LSTM_HIDDEN, np.float32),
                          np.zeros(4 * LSTM_HIDDEN, np.float32), np.zeros(self.net.n_actions, np.float32))
 
@@ -271,7 +253,6 @@ class ConvLSTMPolicy(WeightFile):
         for layer in range(CONV_LAYERS):
             conv_layer(image, state.padded[layer], state.conv_weights[layer], state.conv_biases[layer],
                        state.columns[layer], state.features[layer])
-            selu_(state.features[layer], state.exponentials[layer])
             image = state.features[layer].reshape(-1)
         state.inputs[:self.features] = image
         lstm_step(state.lstm_weights, state.lstm_bias, state.inputs, state.cell, state.gates, *state.actor, state.out,

@@ -13,7 +13,6 @@ import numpy as np
 
 from policies.base import Policy
 from policies.conv import ConvFeatures
-from policies.conv import worker_modules as conv_modules
 from policies.init import default_init
 from policies.kernels import static_forward
 from policies.network import Layout, NetworkSpec, to_kernel_layout
@@ -68,7 +67,6 @@ class StaticPolicy(WeightFile):
         net.check_cnn_input()
         self.net = net
         self.fast_conv = fast_conv  # the CNN's compiled pass (policies.conv)
-        self.worker_modules = conv_modules(net, fast_conv)
         conv = [(f"conv{i + 1}", shape) for i, shape in enumerate(net.conv_shapes)] if net.pixels else []
         dense = [(f"fc{i + 1}", shape) for i, shape in enumerate(net.layer_shapes)]
         self.layout = Layout(conv + dense)

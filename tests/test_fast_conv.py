@@ -20,8 +20,8 @@ import pytest
 from envs import ProblemSpec
 from es.loop import EVAL_SEEDS, EVAL_STREAM, stream_rng
 from policies import PolicySettings, make_policy
-from policies.conv import ConvFeatures, _convolve, _tanh_of_pooled, fast_features, rational_tanh
-from policies.kernels import _TANH_CLAMP, _TANH_P, _TANH_Q
+from policies.conv import ConvFeatures, _convolve, _tanh_of_pooled, fast_features
+from policies.elementary import _TANH_CLAMP, _TANH_P, _TANH_Q, rational_tanh
 from policies.network import NetworkSpec, conv_shapes
 from tests.test_pinned import CASES, PINNED, parameters_hash, train
 

@@ -1,14 +1,19 @@
-"""No number moves: fixed-seed runs give the parameters pinned here, with every backend and on resume.
+"""No number moves: fixed-seed runs give the parameters pinned here, with every backend and on resume,
+and every network gives the outputs pinned here, on every machine.
 
-The hashes were computed on the code as it stood before the layout refactor (issue 10), at commit
-2170917, and are kept as they are: a change that moves one of them changes what a user's fixed-seed
-run produces, and is a bug unless an issue says otherwise. A hash covers the final parameters a run
-leaves, every ``last*.dat`` and ``best*.dat`` file (loaded as float32 arrays, in file-name order), so
-it pins the static weights, the Hebbian coefficients, the CNN and the co-evolved initial weights
-alike, and the choice of ``best``.
+The hashes were computed at commit 2170917 (before the layout refactor of issue 10) and kept as they
+were until issue 38 fixed the order of the arithmetic (no fastmath, the project's own tanh and exp in
+every network, no BLAS or CPU-dispatched numpy function in the strategies): the two MuJoCo cases moved
+then, once, and the cases of the last three lines were added with it (docs/reproducibility.md). A
+change that moves one of them changes what a user's fixed-seed run produces, and is a bug unless an
+issue says otherwise. A run's hash covers the final parameters it leaves, every ``last*.dat`` and
+``best*.dat`` file (loaded as float32 arrays, in file-name order), so it pins the static weights, the
+Hebbian coefficients, the CNN and the co-evolved initial weights alike, and the choice of ``best``.
 
 Each case runs in this process through the scripts' ``main(argv)`` with ``--threads 1``; a few run
 again with two worker processes, with Ray, and split by a resume, and must give the same hash.
+CI runs this file a second time with ``NUMBA_CPU_NAME=generic`` (code for an x86-64 without AVX or
+FMA): the same hashes, or the results depend on the CPU.
 """
 
 from __future__ import annotations
@@ -18,11 +23,14 @@ import hashlib
 import io
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import train_hebb
 import train_static
 from es.files import load_dat
+from policies import PolicySettings, make_policy
+from policies.network import NetworkSpec
 from tests.extras import need
 
 CARTPOLE = ("--environment", "CartPole-v1", "--popsize", "8", "--generations", "2")
@@ -53,9 +61,15 @@ CASES: dict[str, tuple[str, tuple[str, ...]]] = {
                                  "--seed", "51")),
     "hebbian MuJoCo, two bodies": ("hebbian", ("--environment", "Ant-v5,AntAsymRight-v5", "--popsize", "4",
                                                "--generations", "1", "--seed", "52", "--hebb_rule", "ABC")),
+    # continuous control, whose returns move with any bit of the arithmetic: pytorch-es's small net (selu,
+    # exp), PGPE (ClipUp's norms) and SNES (exp and log in its update)
+    "static small net, PGPE": ("static", ("--environment", "Pendulum-v1", "--popsize", "6", "--generations", "2",
+                                          "--seed", "61", "--network", "small", "--strategy", "pgpe")),
+    "hebbian SNES": ("hebbian", ("--environment", "Pendulum-v1", "--popsize", "5", "--generations", "2",
+                                 "--seed", "62", "--strategy", "snes")),
 }
 
-# case -> sha256 of its final parameter files, computed at commit 2170917
+# case -> sha256 of its final parameter files (see the module's docstring)
 PINNED = {
     "static CartPole": "48317aaca0d19a125a37deb36b590e584258a5cab9350fe4e5c709396c7bdb87",
     "static CartPole, 2 episodes": "5628c1346b46e9c6a88c5b307015c8274e935841681940b446510a33653a571d",
@@ -76,8 +90,36 @@ PINNED = {
     "hebbian pixels co-evolved": "f1cd8aca6ef30384ff3db53fcf71ec78f85eec6fb4406bf61dbb56b7412a1223",
     "static several bodies": "e21128b09970d0f109031581dcec55ac9e4400f5fbc9a240e692bbf5dde5faa1",
     "hebbian several bodies": "6b54aea2477d2f95c27575692afbc576c15a796d48004a3b48f0fb220fa06de6",
-    "static MuJoCo": "3be51edccbe68036c7852d19c9e0344a3b9bb5360e75d2b0c30151f17dd21230",
-    "hebbian MuJoCo, two bodies": "427a146c031d895b1a5c25e696fdcbe2a5ffb60d43506dbfa2216fcf2c3b405f",
+    "static MuJoCo": "db78b190d61cca7fd88490d24aa2e212d1f7c297eda988706ca6f03a17bdb79c",
+    "hebbian MuJoCo, two bodies": "ed52394ca22f38597e19d342000a5a09ddbf641d8445184dc53fdb4be323f3e0",
+    "static small net, PGPE": "492ca1545c7cd1da5ce1346526d647be46baf7260f7824012c8add724bdf8d83",
+    "hebbian SNES": "06011de5f7cb1c79bfa787cccf626d5ca67d544609995d0eb02afa91bc56b1fb",
+}
+
+# network -> (policy settings, observation shape, actions, output squashed, steps): every kernel of every
+# network, its outputs step after step on inputs drawn from a fixed seed (the Hebbian weights change at
+# each step), so that the arithmetic itself is pinned, bit for bit; the runs above see it only through
+# returns, which short episodes often leave unchanged
+NETWORKS = {
+    "static MLP": (PolicySettings("static"), (17,), 6, True, 40),
+    "hebbian MLP": (PolicySettings("hebbian", hebb_rule="ABCD_lr"), (28,), 8, True, 40),
+    "static CNN": (PolicySettings("static"), (3, 84, 84), 3, False, 6),
+    "hebbian CNN": (PolicySettings("hebbian"), (3, 84, 84), 3, False, 6),
+    "hebbian CNN, four grey frames": (PolicySettings("hebbian"), (4, 84, 84), 3, False, 4),
+    "static CNN, fast_conv": (PolicySettings("static", fast_conv=True), (3, 84, 84), 3, False, 4),
+    "small net": (PolicySettings("static", network="small"), (17,), 6, True, 40),
+    "conv-LSTM": (PolicySettings("static", network="lstm"), (1, 42, 42), 6, False, 6),
+}
+# network -> sha256 of its outputs
+PINNED_OUTPUTS = {
+    "static MLP": "0ad267b255efd6b3c9fbc61ac1da553b18bb2ccb3922b79c0ef8f0e2eeca1d01",
+    "hebbian MLP": "528bc841b139d102a36c30cfce1bd44050e4d1acad86f06296ad89a183228e24",
+    "static CNN": "e55a090f04224e36347921cbef762d037f50b01150f2dc145245f6d0d5ea14f5",
+    "hebbian CNN": "35fffadbd3d60d99b7e2635b056037dfe36d97f33fe2f478e2f38485b186160b",
+    "hebbian CNN, four grey frames": "ed748c5cd8bb4e6f9b5285e4ba9327267a3d34eb2be44f20d231bb474b28ef12",
+    "static CNN, fast_conv": "c148c0560e762613f621b926bc86be1f97839e4eff8001676203b15693cf152d",
+    "small net": "7b6f3958ba530e7c50fec9a6642cc978e0ac290cc5d12eed66ff363eebccd6e0",
+    "conv-LSTM": "a30e959a3db86a49fc920fae2ff39b1c4c26323560f3ff23b8f6b371c33b6808",
 }
 
 MAINS = {"static": train_static.main, "hebbian": train_hebb.main}
@@ -129,3 +171,25 @@ def test_ray_gives_the_pinned_parameters(case, tmp_path):
     need("ray")
     (kind, argv), expected = CASES[case], PINNED[case]
     assert parameters_hash(train(kind, tmp_path, *argv, "--threads", "2", "--backend", "ray")) == expected
+
+
+def outputs_hash(network: str) -> str:
+    """The network's outputs over its steps, from parameters and inputs drawn with seed 7."""
+    settings, shape, actions, squash, steps = NETWORKS[network]
+    policy = make_policy(settings, NetworkSpec(shape, actions, squash))
+    rng = np.random.default_rng(7)
+    params = (policy.initial_params(rng) if settings.kind == "static"
+              else rng.standard_normal(policy.num_params).astype(np.float32))
+    state = policy.reset(params, np.random.default_rng(8))
+    digest = hashlib.sha256()
+    low, high = (0.0, 1.0) if len(shape) == 3 else (-2.0, 2.0)  # pixels in [0, 1], state vectors around 0
+    for _ in range(steps):
+        observation = (low + (high - low) * rng.random(shape)).astype(np.float32)
+        output, state = policy.act(params, state, observation)
+        digest.update(np.asarray(output, dtype=np.float32).tobytes())
+    return digest.hexdigest()
+
+
+@pytest.mark.parametrize("network", list(NETWORKS))
+def test_network_outputs_are_pinned(network):
+    assert outputs_hash(network) == PINNED_OUTPUTS[network]

@@ -44,6 +44,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from es import exact
 from es.noise import NoiseTable
 from es.optimizers import Adam, OptimizerState
 from es.shaping import rank
@@ -54,10 +55,10 @@ def clipup_velocity(velocity: np.ndarray, gradient: np.ndarray, step_size: float
                     momentum: float) -> np.ndarray:
     """ClipUp's new velocity: the normalised gradient times the step size, added to the decayed
     velocity, clipped to norm max_speed."""
-    norm = np.linalg.norm(gradient)
+    norm = exact.norm(gradient)
     ascent = gradient * (step_size / norm) if norm > 0 else np.zeros_like(gradient)
     velocity = momentum * velocity + ascent
-    speed = np.linalg.norm(velocity)
+    speed = exact.norm(velocity)
     return velocity * (max_speed / speed) if speed > max_speed else velocity
 
 

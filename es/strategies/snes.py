@@ -25,6 +25,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from es import exact
 from es.noise import NoiseTable
 from es.strategy import ESSettings, ESState, Population, check_fitness
 
@@ -40,7 +41,7 @@ def utilities(fitness: np.ndarray) -> np.ndarray | None:
     population = fitness.size
     if np.all(fitness == fitness[0]):
         return None
-    by_rank = np.maximum(0.0, math.log(population / 2 + 1) - np.log(np.arange(1, population + 1)))
+    by_rank = np.maximum(0.0, math.log(population / 2 + 1) - exact.log(np.arange(1, population + 1)))
     by_rank = by_rank / by_rank.sum() - 1 / population
     order = np.argsort(-fitness, kind="stable")  # best first
     values = np.empty(population)
@@ -81,7 +82,7 @@ class SNES:
                 grad_sigma += weight * (sample * sample - 1)
             with np.errstate(over="ignore", invalid="ignore"):  # a non-finite step is the loop's to refuse
                 theta = (theta + self.lr * sigma * grad_mu).astype(np.float32)
-                sigma = sigma * np.exp(self.sigma_lr / 2 * grad_sigma)
+                sigma = sigma * exact.exp(self.sigma_lr / 2 * grad_sigma)
         new_state = replace(state, theta=theta, sigma=float(sigma.mean()), generation=state.generation + 1,
                             strategy={"sigma": sigma})
         return new_state, {"update_factor": self.lr, "skipped": weights is None}
