@@ -7,15 +7,23 @@
     python experiments/paper.py ant hebbian
     python experiments/paper.py ant hebbian --popsize 8 --generations 2 --episodes 3   # a quick try
     python experiments/paper.py ant report            # static against Hebbian over every seed run so far
+    python experiments/paper.py carracing hebbian --budget 120   # train for at most 2 hours, then stop, saved
 
 Each experiment is a data file, experiments/paper/<experiment>_<kind>.toml, that the training
 scripts read with --config (the same loader as a run's config.json); its [evaluation] section says
 where and how long to evaluate. Flags given here override the file.
 
 Runs take hours to days on 2 cores (experiments/README.md). Each experiment has its own folder
-(default runs/<experiment>_<kind>_seed<seed>); running the same command again resumes the newest
-run there from its checkpoint (--resume RUN_DIR, --generations being the total), and once training
-is complete it only evaluates. --dry-run prints the commands instead.
+(default results/paper/<experiment>_<kind>_seed<seed>, in the repository: the campaign's runs, which
+are committed as they progress); running the same command again resumes the newest run there from its
+checkpoint (--resume RUN_DIR, --generations being the total), and once training is complete it only
+evaluates. --dry-run prints the commands instead.
+
+--budget MINUTES trains one chunk (experiments/campaign.py): it stops at a generation boundary before
+the budget is spent, everything saved, and leaves in the run folder only what continuing and evaluating
+need; it prints how far the run got and the command that continues it. While it runs, campaign.pid
+beside the experiment's folder (results/paper/campaign.pid) holds its process id; SIGINT saves and
+stops it within a minute.
 
 Every value is checked before anything runs, --dry-run included, by the training script's own parser
 and checks (``check_training``); a folder whose run has other settings than the ones asked for
@@ -34,6 +42,7 @@ import argparse
 import shlex
 import subprocess
 import sys
+import time
 import tomllib
 from pathlib import Path
 
@@ -41,11 +50,14 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # the project's modules, when run as a script
 
 from cli.errors import USER_ERRORS, Parser, say  # noqa: E402
-from cli.flags import non_empty, positive_int, seed_value, threads_value  # noqa: E402
+from cli.flags import non_empty, positive_float, positive_int, seed_value, threads_value  # noqa: E402
 from cli.hints import EVALUATE_SCRIPTS, TRAIN_SCRIPTS  # noqa: E402
+from experiments import campaign  # noqa: E402
 from report.stats import DEFAULT_REPS  # noqa: E402
 
 FILES = ROOT / "experiments" / "paper"
+RESULTS = Path("results") / "paper"  # the campaign's run folders, relative to the repository's root
+HELD_OUT_SEED = 2**31  # the evaluation's first episode seed: training draws its seeds below 2**31 - 1, never these
 EXPERIMENTS = sorted({path.stem.split("_")[0] for path in FILES.glob("*.toml")})
 
 
@@ -63,7 +75,10 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
                         help="evaluation episodes per body (default: the file's)")
     parser.add_argument("--threads", type=threads_value, default=None,
                         help="workers; -1 = all cores (default: the file's)")
-    parser.add_argument("--folder", type=non_empty, default=None, help="default: runs/<experiment>_<kind>_seed<seed>")
+    parser.add_argument("--folder", type=non_empty, default=None,
+                        help=f"default: {RESULTS}/<experiment>_<kind>_seed<seed> in the repository")
+    parser.add_argument("--budget", type=positive_float, default=None, metavar="MINUTES",
+                        help="train one chunk of at most MINUTES, stop at a generation boundary, saved (the campaign)")
     parser.add_argument("--runs", type=Path, default=ROOT / "runs",
                         help="with report: the folder holding the runs/<experiment>_<kind>_seed<seed> folders")
     parser.add_argument("--reps", type=positive_int, default=DEFAULT_REPS, help="with report: bootstrap replications")
@@ -85,7 +100,7 @@ def train_command(args: argparse.Namespace, file: Path, folder: Path) -> list[st
     """A new run from the experiment file, or the resume of the folder's run; on resume, the settings asked
     for are given again, so the training script refuses them where the run has others."""
     command = [sys.executable, str(ROOT / TRAIN_SCRIPTS[args.kind])]
-    previous = latest_run(folder)
+    previous = latest_run(ROOT / folder)  # ``folder``: relative to the repository's root, where the child runs
     if previous is not None:
         return command + ["--resume", str(previous), *overrides(args, "seed", "popsize", "generations", "threads")]
     return command + ["--config", str(file), "--folder", str(folder),
@@ -114,7 +129,8 @@ def evaluate_command(args: argparse.Namespace, experiment: dict, run_dir: Path) 
     """The final weights (last*.dat) on every body; statistics to JSON, one episode to a PNG."""
     evaluation, policy = experiment["evaluation"], experiment["policy"]
     command = [sys.executable, str(ROOT / EVALUATE_SCRIPTS[args.kind]), "--environment", evaluation["environment"],
-               "--episodes", str(args.episodes if args.episodes is not None else evaluation["episodes"]), "--seed", "0",
+               "--episodes", str(args.episodes if args.episodes is not None else evaluation["episodes"]),
+               "--seed", str(HELD_OUT_SEED),
                "--json", str(run_dir / "evaluation.json"), "--plot", str(run_dir / "adaptation.png")]
     if args.kind == "static":
         return command + ["--path_weights", str(run_dir / "last.dat")]
@@ -170,21 +186,84 @@ def main(argv: list[str] | None = None) -> int:
     with open(file, "rb") as handle:
         experiment = tomllib.load(handle)
     seed = args.seed if args.seed is not None else experiment["run"]["seed"]
-    folder = Path(args.folder or ROOT / "runs" / f"{args.experiment}_{args.kind}_seed{seed}")
+    # the child runs in the repository's root: the default folder relative to it (config.json stays
+    # portable), a folder given relative to where this command runs
+    folder = Path(args.folder).resolve() if args.folder else RESULTS / f"{args.experiment}_{args.kind}_seed{seed}"
     command = train_command(args, file, folder)
     try:
         check_training(args.kind, command)
     except (*USER_ERRORS, ValueError) as error:
         print(f"paper.py: error: {error}", file=sys.stderr)
         return 2
+    if args.budget is not None and not args.dry_run:
+        return run_campaign(args, experiment, command, ROOT / folder)
     code = run(command, args.dry_run)
     if code != 0:
         return code
-    run_dir = latest_run(folder)
+    run_dir = latest_run(ROOT / folder)
     if run_dir is None:  # a dry run before any training
         say("# then, once the run exists, the evaluation of its last*.dat files")
         run_dir = folder / "<run folder>"
     return run(evaluate_command(args, experiment, run_dir), args.dry_run)
+
+
+def generations_done(run_dir: Path | None) -> int:
+    from es.runfolder import read_checkpoint
+
+    return 0 if run_dir is None else read_checkpoint(run_dir / "checkpoint.npz").generation
+
+
+def run_campaign(args: argparse.Namespace, experiment: dict, command: list[str], folder: Path) -> int:
+    """One chunk of the campaign (experiments/campaign.py): train until the budget is spent, evaluate once
+    training is complete, leave only what continuing and evaluating need, say how far the run got."""
+    deadline = time.monotonic() + 60 * args.budget
+    total = args.generations if args.generations is not None else experiment["run"]["generations"]
+
+    def metrics() -> Path | None:
+        run_dir = latest_run(folder)
+        return run_dir / "metrics.csv" if run_dir is not None else None
+
+    try:
+        with campaign.pid_file(folder.parent / campaign.PID_FILE):  # results/paper/campaign.pid by default
+            chunk = None
+            if generations_done(latest_run(folder)) < total:
+                say(f"campaign: training, for at most {args.budget:g} min: $ {shlex.join(command)}")
+                chunk = campaign.Chunk(command, deadline, metrics, ROOT, say)
+                code = chunk.run()
+                if code != 0 and code not in campaign.STOPPED:
+                    return code if code > 0 else 1
+            run_dir = latest_run(folder)
+            if run_dir is None:  # stopped before the run folder was made
+                say("campaign: stopped before the run started; nothing was saved")
+                return 130 if chunk is not None and chunk.signals else 1
+            done = generations_done(run_dir)
+            interrupted = chunk is not None and chunk.signals > 0
+            if done >= total and not (run_dir / "evaluation.json").exists() and not interrupted:
+                evaluation = evaluate_command(args, experiment, run_dir)
+                say(f"campaign: training complete; evaluating: $ {shlex.join(evaluation)}")
+                chunk = campaign.Chunk(evaluation, deadline, lambda: None, ROOT, say)
+                code = chunk.run()
+                interrupted = interrupted or chunk.signals > 0
+                if code != 0 and code not in campaign.STOPPED:
+                    return code if code > 0 else 1
+    except campaign.CampaignError as error:
+        print(f"paper.py: error: {error}", file=sys.stderr)
+        return 2
+    campaign.prune(run_dir, complete=done >= total)
+    evaluated = (run_dir / "evaluation.json").exists()
+    state = "complete and evaluated" if evaluated else "complete, not yet evaluated" if done >= total else "saved"
+    say(f"campaign: {run_dir.relative_to(ROOT) if run_dir.is_relative_to(ROOT) else run_dir}: generation {done} "
+        f"of {total}, {state}")
+    if not evaluated:
+        say(f"continue with: python experiments/paper.py {continue_words(args)} --budget MINUTES")
+    return 130 if interrupted else 0
+
+
+def continue_words(args: argparse.Namespace) -> str:
+    words = [args.experiment, args.kind, *overrides(args, "seed", "popsize", "generations", "episodes")]
+    if args.folder:
+        words += ["--folder", args.folder]
+    return shlex.join(words)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,174 @@
+"""The paper's campaign: a long training run done in chunks, one per session, on whatever machine is at hand.
+
+``experiments/paper.py EXPERIMENT KIND --budget MINUTES`` runs one chunk through ``run_chunk``: the
+training script (a new run, or the resume of the folder's run) as a child process, stopped at a
+generation boundary before the budget is spent, everything saved. Between chunks the run folder holds
+only what continuing and evaluating need (``prune``), so that it can be committed as it is and a fresh
+clone on another machine continues it bit for bit (docs/experiments.md, "The campaign").
+
+- **The budget.** Every generation appends a row to the run's metrics.csv, with its duration. When a
+  row appears, the next generation has just started; if it and one more would not both end before the
+  deadline, the child is asked to stop after it (SIGINT: finish the generation, save, stop). If the
+  deadline comes anyway (a generation longer than the last), the child is stopped at once (a second
+  SIGINT): the generation in progress is lost, the last one saved stays intact.
+- **Interrupts.** SIGINT or SIGTERM to this process is passed on as a first SIGINT; if the child has not
+  ended within ``GRACE`` seconds, or at a second signal, it is stopped at once. So the campaign is
+  saved and gone within a minute of one SIGINT.
+- **The pid file.** While a chunk runs, ``results/paper/campaign.pid`` holds this process's id (what a
+  session's before-stop hook signals); it is removed when the chunk ends. A live campaign's file is
+  never taken over: a second campaign is refused.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+PID_FILE = "campaign.pid"  # beside the experiments' folders: results/paper/campaign.pid
+STOPPED = (130, -signal.SIGINT)  # a child that stopped at a SIGINT, its last saved generation intact
+GRACE = 30.0  # seconds a generation may take to finish after the first SIGINT, before a stop at once
+POLL = 0.5  # seconds between looks at the child and at metrics.csv
+SAFETY = 1.15  # a generation may take this much longer than the last one did
+# what a run folder keeps between chunks: what continuing needs, and what evaluating wrote
+KEPT = ("config.json", "checkpoint.npz", "metrics.csv", "evaluation.json", "adaptation.png")
+FINAL_WEIGHTS = "last*.dat"  # kept once training is complete: the weights evaluated and shipped
+
+
+class CampaignError(ValueError):
+    """A campaign cannot start (another one runs)."""
+
+
+@contextlib.contextmanager
+def pid_file(path: Path):
+    """Hold ``path`` with this process's id while the block runs; refuse one a live process holds."""
+    try:
+        holder = int(path.read_text().strip() or 0)
+    except (FileNotFoundError, ValueError):
+        holder = 0
+    if holder and holder != os.getpid() and _alive(holder):
+        raise CampaignError(f"a campaign is already running (pid {holder}, in {path}); wait for it to end, or stop "
+                            f"it with: kill -INT {holder}")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    staged = path.with_name(path.name + ".tmp")
+    staged.write_text(f"{os.getpid()}\n")
+    staged.replace(path)
+    try:
+        yield
+    finally:
+        with contextlib.suppress(OSError, ValueError):
+            if int(path.read_text().strip()) == os.getpid():
+                path.unlink()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's process
+        return True
+    return True
+
+
+def _last_row(metrics: Path) -> dict | None:
+    """The last complete row of a metrics.csv, or None (no file, no row yet, a row being written)."""
+    try:
+        with open(metrics, newline="") as handle:
+            rows = list(csv.DictReader(handle))
+    except OSError:
+        return None
+    for row in reversed(rows):
+        if row.get("seconds") not in (None, "") and row.get("generation") not in (None, ""):
+            return row
+    return None
+
+
+class Chunk:
+    """One chunk of training: ``command`` as a child, under ``deadline`` (``time.monotonic()``), with
+    ``find_metrics()`` giving the run's metrics.csv once the run folder exists."""
+
+    def __init__(self, command: list[str], deadline: float, find_metrics, cwd: Path, log=print):
+        self.command, self.deadline, self.find_metrics, self.cwd, self.log = command, deadline, find_metrics, cwd, log
+        self.signals = 0  # SIGINT or SIGTERM received by this process
+        self.signalled: float | None = None  # when the first one came
+        self.asked = False  # the child was asked to finish its generation and stop
+        self.stopped_at_once = False
+        self.pending = False  # a second SIGINT to send at the next poll
+
+    def last_generation(self) -> tuple[str | None, float | None]:
+        """The last generation metrics.csv records, and its duration in seconds."""
+        metrics = self.find_metrics()
+        row = _last_row(metrics) if metrics is not None else None
+        return (row["generation"], float(row["seconds"])) if row is not None else (None, None)
+
+    def run(self) -> int:
+        """The child's exit code: 0, complete; 130 (or -2: SIGINT reached it while it was closing), stopped with
+        its last generation saved; anything else, it failed."""
+        previous = {signum: signal.signal(signum, self._signal) for signum in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            seen, duration = self.last_generation()  # a resumed run's: its next generation starts with the child
+            began = time.monotonic()
+            self.child = subprocess.Popen(self.command, cwd=self.cwd, start_new_session=True)  # only we signal it
+            while self.child.poll() is None:
+                if not self.asked and duration is not None and began + 2 * SAFETY * duration > self.deadline:
+                    self._ask("the budget leaves no room for another generation after this one")
+                time.sleep(POLL)
+                generation, seconds = self.last_generation()
+                if generation != seen:  # a generation ended, and the next one starts
+                    seen, duration, began = generation, seconds, time.monotonic()
+                self._enforce(time.monotonic())
+            return self.child.wait()
+        finally:
+            for signum, handler in previous.items():
+                signal.signal(signum, handler)
+
+    def _enforce(self, now: float) -> None:
+        """Ask the child to stop after its generation at the first signal; stop it at once at the second, when
+        it takes longer than ``GRACE`` after the first, or past the deadline (with ``GRACE`` more once
+        asked: it is finishing a generation that was expected to end in time)."""
+        if self.pending:  # the second of two SIGINTs, one poll after the first: two at once may count as one
+            self.pending = False
+            self._send()
+            return
+        if self.signals and not self.asked:
+            self._ask("interrupted")
+        late = self.signalled is not None and now - self.signalled > GRACE
+        overdue = now > self.deadline + (GRACE if self.asked else 0.0)
+        if not self.stopped_at_once and (self.signals >= 2 or late or overdue):
+            self.stopped_at_once = True
+            self.log("campaign: stopping the training at once; its last saved generation stays as it is")
+            if not self.asked:
+                self.asked, self.pending = True, True
+            self._send()
+
+    def _ask(self, why: str) -> None:
+        self.asked = True
+        self.log(f"campaign: {why}: the training finishes its generation, saves and stops")
+        self._send()
+
+    def _send(self) -> None:
+        with contextlib.suppress(ProcessLookupError):
+            self.child.send_signal(signal.SIGINT)
+
+    def _signal(self, signum, frame) -> None:
+        self.signals += 1
+        if self.signalled is None:
+            self.signalled = time.monotonic()
+
+
+def prune(run_dir: Path, complete: bool) -> list[str]:
+    """Remove from ``run_dir`` what neither continuing nor evaluating needs (the per-generation copies of
+    the weights, best*, the fitness log and plot, the lock); the final weights stay once ``complete``.
+    Returns the names removed."""
+    keep = set(KEPT) | ({path.name for path in run_dir.glob(FINAL_WEIGHTS)} if complete else set())
+    removed = []
+    for path in sorted(run_dir.iterdir()):
+        if path.is_file() and path.name not in keep:
+            path.unlink()
+            removed.append(path.name)
+    return removed

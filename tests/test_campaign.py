@@ -1,0 +1,195 @@
+"""The paper's campaign (``experiments/paper.py --budget``, ``experiments/campaign.py``), through the real script
+on small CarRacing runs: a chunk stopped by SIGINT, committed with results/paper/.gitignore, cloned and
+continued elsewhere, gives bit for bit the uninterrupted run; a budget stops at a generation boundary with
+everything saved; the pid file; a second SIGINT; a second campaign refused; what a run folder keeps.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from es.runfolder import read_checkpoint
+from experiments.campaign import prune
+
+ROOT = Path(__file__).resolve().parent.parent
+ENV = {**os.environ, "SDL_VIDEODRIVER": "dummy", "PYTHONUNBUFFERED": "1"}
+SMALL = ("carracing", "hebbian", "--popsize", "4", "--episodes", "1", "--threads", "2")
+KEPT_WHILE_RUNNING = {"config.json", "checkpoint.npz", "metrics.csv"}
+
+
+def paper(*args: str, folder: Path, budget: float = 10) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "experiments/paper.py", *args, "--folder", str(folder), "--budget",
+                           str(budget)], cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=600)
+
+
+def start(*args: str, folder: Path, budget: float = 10) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "experiments/paper.py", *args, "--folder", str(folder), "--budget",
+                             str(budget)], cwd=ROOT, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True)
+
+
+def run_of(folder: Path) -> Path:
+    (run,) = [path for path in folder.iterdir() if path.is_dir()]
+    return run
+
+
+def generations_recorded(run: Path) -> list[int]:
+    if not (run_path := run / "metrics.csv").exists():
+        return []
+    with open(run_path, newline="") as handle:
+        return [int(row["generation"]) for row in csv.DictReader(handle)]
+
+
+def wait_for_generations(folder: Path, count: int, timeout: float = 300) -> None:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        runs = [path for path in folder.iterdir() if path.is_dir()] if folder.exists() else []
+        if runs and len(generations_recorded(runs[0])) >= count:
+            return
+        time.sleep(0.2)
+    raise AssertionError(f"no {count} generations in {folder} within {timeout} s")
+
+
+def numbers(run: Path) -> tuple[dict[str, bytes], list[dict]]:
+    """The final weight files' bytes, and metrics.csv without its timings."""
+    weights = {path.name: path.read_bytes() for path in sorted(run.glob("last*.dat"))}
+    with open(run / "metrics.csv", newline="") as handle:
+        rows = [{key: value for key, value in row.items() if "seconds" not in key} for row in csv.DictReader(handle)]
+    return weights, rows
+
+
+def git(*args: str, cwd: Path) -> str:
+    names = {"GIT_AUTHOR_NAME": "t", "GIT_AUTHOR_EMAIL": "t@t", "GIT_COMMITTER_NAME": "t", "GIT_COMMITTER_EMAIL": "t@t"}
+    return subprocess.run(["git", *args], cwd=cwd, check=True, capture_output=True, text=True,
+                          env={**os.environ, **names}).stdout
+
+
+def test_a_chunk_committed_and_continued_in_a_clone_is_the_uninterrupted_run(tmp_path):
+    generations = ("--generations", "4")
+    whole = paper(*SMALL, *generations, folder=tmp_path / "whole")
+    assert whole.returncode == 0, whole.stdout[-2000:] + whole.stderr[-2000:]
+    assert "generation 4 of 4, complete and evaluated" in whole.stdout
+
+    repository = tmp_path / "repository"
+    (repository / "results" / "paper").mkdir(parents=True)
+    shutil.copy(ROOT / "results" / "paper" / ".gitignore", repository / "results" / "paper" / ".gitignore")
+    folder = repository / "results" / "paper" / "carracing_hebbian_seed1"
+    chunk = start(*SMALL, *generations, folder=folder)
+    wait_for_generations(folder, 2)
+    chunk.send_signal(signal.SIGINT)
+    output, _ = chunk.communicate(timeout=120)
+    assert chunk.returncode == 130, output[-2000:]
+    assert not (repository / "results" / "paper" / "campaign.pid").exists()
+    run = run_of(folder)
+    done = read_checkpoint(run / "checkpoint.npz").generation
+    assert 2 <= done < 4 and generations_recorded(run) == list(range(1, done + 1))
+    assert {path.name for path in run.iterdir()} == KEPT_WHILE_RUNNING
+    assert f"generation {done} of 4, saved" in output and "continue with: python experiments/paper.py" in output
+
+    git("init", "-q", cwd=repository)
+    git("add", "-A", cwd=repository)
+    git("commit", "-q", "-m", "chunk", cwd=repository)
+    committed = set(git("ls-files", cwd=repository).split())
+    relative = run.relative_to(repository)
+    assert committed == {"results/paper/.gitignore", *(f"{relative}/{name}" for name in KEPT_WHILE_RUNNING)}
+    clone = tmp_path / "clone"
+    git("clone", "-q", str(repository), str(clone), cwd=tmp_path)
+    continued = paper(*SMALL, *generations, folder=clone / "results" / "paper" / "carracing_hebbian_seed1")
+    assert continued.returncode == 0, continued.stdout[-2000:] + continued.stderr[-2000:]
+    assert f"resuming {clone / relative} at generation {done} of 4" in continued.stdout
+    assert numbers(clone / relative) == numbers(run_of(tmp_path / "whole"))
+    assert {path.name for path in (clone / relative).iterdir()} == {
+        *KEPT_WHILE_RUNNING, "evaluation.json", "adaptation.png", "last_coeffs.dat", "last_CNN_parameters.dat"}
+    assert (clone / relative / "evaluation.json").read_text() == (run_of(tmp_path / "whole") /
+                                                                   "evaluation.json").read_text().replace(
+        str(run_of(tmp_path / "whole")), str(clone / relative))
+
+
+def test_a_budget_stops_at_a_generation_boundary_with_everything_saved(tmp_path):
+    started = time.monotonic()
+    result = paper(*SMALL, "--generations", "1000", folder=tmp_path / "runs" / "x", budget=0.25)
+    elapsed = time.monotonic() - started
+    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
+    assert elapsed < 15 + 30 + 20  # the budget, the grace a generation gets, start and stop
+    run = run_of(tmp_path / "runs" / "x")
+    done = read_checkpoint(run / "checkpoint.npz").generation
+    assert done >= 1 and generations_recorded(run) == list(range(1, done + 1))
+    assert f"generation {done} of 1000, saved" in result.stdout
+    assert {path.name for path in run.iterdir()} == KEPT_WHILE_RUNNING
+    assert not (tmp_path / "runs" / "campaign.pid").exists()
+
+
+def test_a_second_sigint_stops_at_once_and_the_last_save_stays_intact(tmp_path):
+    """Stopped at once, the run keeps its last checkpoint (a metrics row written after it, if the stop came
+    during a save, is dropped when the run continues); the next chunk continues it."""
+    folder = tmp_path / "runs" / "x"
+    larger = ("carracing", "hebbian", "--popsize", "32", "--threads", "2", "--episodes", "1")
+    chunk = start(*larger, "--generations", "1000", folder=folder)
+    wait_for_generations(folder, 1)
+    assert int((tmp_path / "runs" / "campaign.pid").read_text()) == chunk.pid
+    chunk.send_signal(signal.SIGINT)
+    time.sleep(1.0)
+    chunk.send_signal(signal.SIGINT)
+    stopped = time.monotonic()
+    output, _ = chunk.communicate(timeout=120)
+    assert time.monotonic() - stopped < 30 and chunk.returncode == 130, output[-2000:]
+    assert "stopping the training at once" in output
+    run = run_of(folder)
+    checkpoint = read_checkpoint(run / "checkpoint.npz")
+    recorded = generations_recorded(run)
+    assert np.isfinite(checkpoint.theta).all() and recorded[:checkpoint.generation] == list(
+        range(1, checkpoint.generation + 1)) and len(recorded) <= checkpoint.generation + 1
+    assert not (tmp_path / "runs" / "campaign.pid").exists()
+    continued = paper(*larger, "--generations", str(checkpoint.generation + 1), folder=folder)
+    assert continued.returncode == 0, continued.stdout[-2000:] + continued.stderr[-2000:]
+    assert generations_recorded(run) == list(range(1, checkpoint.generation + 2))
+
+
+def test_a_second_campaign_is_refused_in_one_line(tmp_path):
+    (tmp_path / "runs").mkdir()
+    holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        (tmp_path / "runs" / "campaign.pid").write_text(f"{holder.pid}\n")
+        result = paper(*SMALL, "--generations", "2", folder=tmp_path / "runs" / "x")
+    finally:
+        holder.kill()
+        holder.wait()
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert result.stderr.strip() == (f"paper.py: error: a campaign is already running (pid {holder.pid}, in "
+                                     f"{tmp_path / 'runs' / 'campaign.pid'}); wait for it to end, or stop it with: "
+                                     f"kill -INT {holder.pid}")
+    assert not (tmp_path / "runs" / "x").exists()
+    assert (tmp_path / "runs" / "campaign.pid").read_text() == f"{holder.pid}\n"
+
+
+def test_a_stale_pid_file_is_taken_over(tmp_path):
+    (tmp_path / "runs").mkdir()
+    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    (tmp_path / "runs" / "campaign.pid").write_text(ended.stdout)
+    result = paper(*SMALL, "--generations", "1", folder=tmp_path / "runs" / "x")
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert not (tmp_path / "runs" / "campaign.pid").exists()
+
+
+def test_prune_keeps_what_continuing_and_evaluating_need(tmp_path):
+    names = ["config.json", "checkpoint.npz", "metrics.csv", "evaluation.json", "adaptation.png", "last_coeffs.dat",
+             "last_CNN_parameters.dat", "best_coeffs.dat", "HEBcoeffs__CarRacing-v0__rew_5__coeffs__3.dat", ".lock",
+             "fitness.png", "Fitness_values_run_CarRacing-v0.npy"]
+    for name in names:
+        (tmp_path / name).write_text("x")
+    removed = prune(tmp_path, complete=False)
+    assert sorted(path.name for path in tmp_path.iterdir()) == sorted(names[:5])
+    assert set(removed) == set(names[5:])
+    (tmp_path / "last.dat").write_text("x")
+    (tmp_path / "best.dat").write_text("x")
+    assert prune(tmp_path, complete=True) == ["best.dat"]
+    assert (tmp_path / "last.dat").exists()
