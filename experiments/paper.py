@@ -56,16 +56,18 @@ from experiments import campaign  # noqa: E402
 from report.stats import DEFAULT_REPS  # noqa: E402
 
 FILES = ROOT / "experiments" / "paper"
+CAMPAIGN = FILES / "campaign.toml"  # the campaign's runs, in order
 RESULTS = Path("results") / "paper"  # the campaign's run folders, relative to the repository's root
 HELD_OUT_SEED = 2**31  # the evaluation's first episode seed: training draws its seeds below 2**31 - 1, never these
-EXPERIMENTS = sorted({path.stem.split("_")[0] for path in FILES.glob("*.toml")})
+EXPERIMENTS = sorted({path.stem.split("_")[0] for path in FILES.glob("*_*.toml")})
 
 
 def parse(argv: list[str] | None) -> argparse.Namespace:
     parser = Parser(prog="paper.py", description=__doc__.splitlines()[0],
                     formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:]))
-    parser.add_argument("experiment", choices=EXPERIMENTS)
-    parser.add_argument("kind", choices=(*TRAIN_SCRIPTS, "report"),
+    parser.add_argument("experiment", choices=(*EXPERIMENTS, "campaign"),
+                        help="an experiment, or campaign: the next runs of experiments/paper/campaign.toml (--budget)")
+    parser.add_argument("kind", nargs="?", choices=(*TRAIN_SCRIPTS, "report"),
                         help="train and evaluate one kind, or report: compare the kinds over their seeds")
     parser.add_argument("--seed", type=seed_value, default=None, help="seed of the training run (default: the file's)")
     parser.add_argument("--popsize", type=positive_int, default=None, help="default: the file's")
@@ -79,11 +81,27 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
                         help=f"default: {RESULTS}/<experiment>_<kind>_seed<seed> in the repository")
     parser.add_argument("--budget", type=positive_float, default=None, metavar="MINUTES",
                         help="train one chunk of at most MINUTES, stop at a generation boundary, saved (the campaign)")
-    parser.add_argument("--runs", type=Path, default=ROOT / "runs",
-                        help="with report: the folder holding the runs/<experiment>_<kind>_seed<seed> folders")
+    parser.add_argument("--runs", type=Path, default=ROOT / RESULTS,
+                        help=f"with report: the folder holding the <experiment>_<kind>_seed<seed> folders (default: "
+                             f"{RESULTS})")
     parser.add_argument("--reps", type=positive_int, default=DEFAULT_REPS, help="with report: bootstrap replications")
     parser.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    if args.experiment == "campaign":
+        others = [f"--{name.replace('_', '-')}" for name in ("kind", "seed", "popsize", "generations", "episodes",
+                                                             "folder", "dry_run")
+                  if getattr(args, name) not in (None, False)]
+        if args.budget is None or others:
+            parser.error("campaign takes --budget MINUTES (and --threads), and its runs from "
+                         f"{shown(CAMPAIGN)}" + (f", not {' '.join(others)}" if others else ""))
+    elif args.kind is None:
+        parser.error(f"{args.experiment} needs a kind: static, hebbian or report")
+    return args
+
+
+def shown(path: Path) -> Path:
+    """A path as the messages show it: relative to the repository's root where it lies inside."""
+    return path.relative_to(ROOT) if path.is_relative_to(ROOT) else path
 
 
 def latest_run(folder: Path) -> Path | None:
@@ -180,8 +198,16 @@ def report(args: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
+    if args.experiment == "campaign":
+        return run_queue(args)
     if args.kind == "report":
         return report(args)
+    deadline = time.monotonic() + 60 * args.budget if args.budget is not None else None
+    return experiment_main(args, deadline)
+
+
+def experiment_main(args: argparse.Namespace, deadline: float | None) -> int:
+    """One experiment: training and evaluation, or with a ``deadline`` one chunk of the campaign."""
     file = FILES / f"{args.experiment}_{args.kind}.toml"
     with open(file, "rb") as handle:
         experiment = tomllib.load(handle)
@@ -195,8 +221,8 @@ def main(argv: list[str] | None = None) -> int:
     except (*USER_ERRORS, ValueError) as error:
         print(f"paper.py: error: {error}", file=sys.stderr)
         return 2
-    if args.budget is not None and not args.dry_run:
-        return run_campaign(args, experiment, command, ROOT / folder)
+    if deadline is not None and not args.dry_run:
+        return run_campaign(args, experiment, command, ROOT / folder, deadline)
     code = run(command, args.dry_run)
     if code != 0:
         return code
@@ -213,10 +239,10 @@ def generations_done(run_dir: Path | None) -> int:
     return 0 if run_dir is None else read_checkpoint(run_dir / "checkpoint.npz").generation
 
 
-def run_campaign(args: argparse.Namespace, experiment: dict, command: list[str], folder: Path) -> int:
-    """One chunk of the campaign (experiments/campaign.py): train until the budget is spent, evaluate once
-    training is complete, leave only what continuing and evaluating need, say how far the run got."""
-    deadline = time.monotonic() + 60 * args.budget
+def run_campaign(args: argparse.Namespace, experiment: dict, command: list[str], folder: Path,
+                 deadline: float) -> int:
+    """One chunk of the campaign (experiments/campaign.py): train until ``deadline``, evaluate once training is
+    complete, leave only what continuing and evaluating need, say how far the run got."""
     total = args.generations if args.generations is not None else experiment["run"]["generations"]
 
     def metrics() -> Path | None:
@@ -227,7 +253,8 @@ def run_campaign(args: argparse.Namespace, experiment: dict, command: list[str],
         with campaign.pid_file(folder.parent / campaign.PID_FILE):  # results/paper/campaign.pid by default
             chunk = None
             if generations_done(latest_run(folder)) < total:
-                say(f"campaign: training, for at most {args.budget:g} min: $ {shlex.join(command)}")
+                minutes = (deadline - time.monotonic()) / 60
+                say(f"campaign: training, for at most {minutes:.1f} min: $ {shlex.join(command)}")
                 chunk = campaign.Chunk(command, deadline, metrics, ROOT, say)
                 code = chunk.run()
                 if code != 0 and code not in campaign.STOPPED:
@@ -252,10 +279,11 @@ def run_campaign(args: argparse.Namespace, experiment: dict, command: list[str],
     campaign.prune(run_dir, complete=done >= total)
     evaluated = (run_dir / "evaluation.json").exists()
     state = "complete and evaluated" if evaluated else "complete, not yet evaluated" if done >= total else "saved"
-    say(f"campaign: {run_dir.relative_to(ROOT) if run_dir.is_relative_to(ROOT) else run_dir}: generation {done} "
+    say(f"campaign: {shown(run_dir)}: generation {done} "
         f"of {total}, {state}")
     if not evaluated:
-        say(f"continue with: python experiments/paper.py {continue_words(args)} --budget MINUTES")
+        say(f"continue with: python experiments/paper.py {continue_words(args)} --budget MINUTES "
+            "(or the whole campaign: python experiments/paper.py campaign --budget MINUTES)")
     return 130 if interrupted else 0
 
 
@@ -264,6 +292,31 @@ def continue_words(args: argparse.Namespace) -> str:
     if args.folder:
         words += ["--folder", args.folder]
     return shlex.join(words)
+
+
+def run_queue(args: argparse.Namespace) -> int:
+    """``campaign --budget``: the runs of experiments/paper/campaign.toml in order, each continued until it is
+    complete and evaluated, as far as the budget goes."""
+    deadline = time.monotonic() + 60 * args.budget
+    with open(CAMPAIGN, "rb") as handle:
+        entries = tomllib.load(handle)["runs"]
+    for entry in entries:
+        words = shlex.split(entry) + (["--threads", str(args.threads)] if args.threads is not None else [])
+        entry_args = parse([*words, "--budget", str(args.budget)])
+        seed = entry_args.seed if entry_args.seed is not None else 1
+        run_dir = latest_run(ROOT / RESULTS / f"{entry_args.experiment}_{entry_args.kind}_seed{seed}")
+        if run_dir is not None and (run_dir / "evaluation.json").exists():
+            continue
+        if deadline - time.monotonic() < 60:
+            say("campaign: less than a minute of the budget left; stopping before the next run")
+            return 0
+        say(f"campaign: next run: {entry}")
+        code = experiment_main(entry_args, deadline)
+        latest = latest_run(ROOT / RESULTS / f"{entry_args.experiment}_{entry_args.kind}_seed{seed}")
+        if code != 0 or latest is None or not (latest / "evaluation.json").exists():
+            return code
+    say(f"campaign: every run of {shown(CAMPAIGN)} is complete and evaluated")
+    return 0
 
 
 if __name__ == "__main__":

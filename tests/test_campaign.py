@@ -193,3 +193,34 @@ def test_prune_keeps_what_continuing_and_evaluating_need(tmp_path):
     (tmp_path / "best.dat").write_text("x")
     assert prune(tmp_path, complete=True) == ["best.dat"]
     assert (tmp_path / "last.dat").exists()
+
+
+def test_the_campaign_runs_its_entries_in_order_until_each_is_evaluated(tmp_path, monkeypatch, capsys):
+    """``paper.py campaign --budget``: each entry of the campaign file continued until complete and evaluated,
+    then the next; a second call finds nothing left to do."""
+    import experiments.paper as paper_script
+
+    entries = tmp_path / "campaign.toml"
+    small = "--popsize 4 --generations 2 --episodes 1 --threads 2"
+    entries.write_text(f'runs = ["carracing hebbian --seed 1 {small}", "carracing static --seed 1 {small}"]\n')
+    monkeypatch.setattr(paper_script, "CAMPAIGN", entries)
+    monkeypatch.setattr(paper_script, "RESULTS", tmp_path / "results")
+    monkeypatch.setattr(sys, "executable", sys.executable)
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    assert paper_script.main(["campaign", "--budget", "10"]) == 0
+    output = capsys.readouterr().out
+    assert output.index("next run: carracing hebbian") < output.index("next run: carracing static")
+    for kind in ("hebbian", "static"):
+        run = run_of(tmp_path / "results" / f"carracing_{kind}_seed1")
+        assert (run / "evaluation.json").exists() and read_checkpoint(run / "checkpoint.npz").generation == 2
+    assert "every run of" in output and not (tmp_path / "results" / "campaign.pid").exists()
+    assert paper_script.main(["campaign", "--budget", "10"]) == 0
+    assert "next run" not in capsys.readouterr().out
+
+
+def test_the_campaign_takes_only_its_budget_and_threads():
+    result = subprocess.run([sys.executable, "experiments/paper.py", "campaign", "--budget", "5", "--seed", "2"],
+                            cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2 and result.stderr.strip() == (
+        "paper.py: error: campaign takes --budget MINUTES (and --threads), and its runs from "
+        "experiments/paper/campaign.toml, not --seed")
