@@ -86,14 +86,18 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
                              f"{RESULTS})")
     parser.add_argument("--reps", type=positive_int, default=DEFAULT_REPS, help="with report: bootstrap replications")
     parser.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
+    parser.add_argument("--status", action="store_true",
+                        help="with campaign: how far each run got, and what its generations cost (from metrics.csv)")
     args = parser.parse_args(argv)
     if args.experiment == "campaign":
         others = [f"--{name.replace('_', '-')}" for name in ("kind", "seed", "popsize", "generations", "episodes",
                                                              "folder", "dry_run")
                   if getattr(args, name) not in (None, False)]
-        if args.budget is None or others:
-            parser.error("campaign takes --budget MINUTES (and --threads), and its runs from "
+        if (args.budget is None) == (not args.status) or others:
+            parser.error("campaign takes --budget MINUTES (and --threads) or --status, and its runs from "
                          f"{shown(CAMPAIGN)}" + (f", not {' '.join(others)}" if others else ""))
+    elif args.status:
+        parser.error("--status goes with campaign: python experiments/paper.py campaign --status")
     elif args.kind is None:
         parser.error(f"{args.experiment} needs a kind: static, hebbian or report")
     return args
@@ -199,7 +203,7 @@ def report(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
     if args.experiment == "campaign":
-        return run_queue(args)
+        return status() if args.status else run_queue(args)
     if args.kind == "report":
         return report(args)
     deadline = time.monotonic() + 60 * args.budget if args.budget is not None else None
@@ -294,25 +298,61 @@ def continue_words(args: argparse.Namespace) -> str:
     return shlex.join(words)
 
 
+def campaign_entries(threads: int | None = None) -> list[argparse.Namespace]:
+    """The campaign's runs (experiments/paper/campaign.toml), each as paper.py's arguments."""
+    with open(CAMPAIGN, "rb") as handle:
+        entries = tomllib.load(handle)["runs"]
+    extra = ["--threads", str(threads)] if threads is not None else []
+    return [parse([*shlex.split(entry), *extra]) for entry in entries]
+
+
+def entry_folder(args: argparse.Namespace) -> Path:
+    return ROOT / RESULTS / f"{args.experiment}_{args.kind}_seed{args.seed if args.seed is not None else 1}"
+
+
+def status() -> int:
+    """Each campaign run: generations done of the total, the training time metrics.csv records, the mean time
+    and environment steps of the last ten generations, and the last population mean and centre."""
+    from es import files
+
+    for args in campaign_entries():
+        name = f"{args.experiment} {args.kind} seed {args.seed if args.seed is not None else 1}"
+        run_dir = latest_run(entry_folder(args))
+        if run_dir is None:
+            say(f"{name}: not started")
+            continue
+        rows = files.read_metrics(run_dir / "metrics.csv") if (run_dir / "metrics.csv").exists() else []
+        total = files.read_json(run_dir / "config.json")["run"]["generations"]
+        done = generations_done(run_dir)
+        rows = [row for row in rows if int(row["generation"]) <= done]
+        evaluated = " (evaluated)" if (run_dir / "evaluation.json").exists() else ""
+        line = f"{name}: {shown(run_dir)}: generation {done} of {total}{evaluated}"
+        if rows:
+            last = rows[-10:]
+            seconds = sum(float(row["seconds"]) for row in rows)
+            line += (f"; {seconds / 3600:.2f} h of training; the last {len(last)} generations "
+                     f"{sum(float(row['seconds']) for row in last) / len(last):.1f} s and "
+                     f"{sum(int(row['env_steps']) for row in last) / len(last):,.0f} env steps each; "
+                     f"population mean {float(rows[-1]['fitness_mean']):.1f}, "
+                     f"centre {float(rows[-1]['center_return']):.1f}")
+        say(line)
+    return 0
+
+
 def run_queue(args: argparse.Namespace) -> int:
     """``campaign --budget``: the runs of experiments/paper/campaign.toml in order, each continued until it is
     complete and evaluated, as far as the budget goes."""
     deadline = time.monotonic() + 60 * args.budget
-    with open(CAMPAIGN, "rb") as handle:
-        entries = tomllib.load(handle)["runs"]
-    for entry in entries:
-        words = shlex.split(entry) + (["--threads", str(args.threads)] if args.threads is not None else [])
-        entry_args = parse([*words, "--budget", str(args.budget)])
-        seed = entry_args.seed if entry_args.seed is not None else 1
-        run_dir = latest_run(ROOT / RESULTS / f"{entry_args.experiment}_{entry_args.kind}_seed{seed}")
+    for entry in campaign_entries(args.threads):
+        run_dir = latest_run(entry_folder(entry))
         if run_dir is not None and (run_dir / "evaluation.json").exists():
             continue
         if deadline - time.monotonic() < 60:
             say("campaign: less than a minute of the budget left; stopping before the next run")
             return 0
-        say(f"campaign: next run: {entry}")
-        code = experiment_main(entry_args, deadline)
-        latest = latest_run(ROOT / RESULTS / f"{entry_args.experiment}_{entry_args.kind}_seed{seed}")
+        say(f"campaign: next run: {entry.experiment} {entry.kind} seed {entry.seed if entry.seed is not None else 1}")
+        code = experiment_main(entry, deadline)
+        latest = latest_run(entry_folder(entry))
         if code != 0 or latest is None or not (latest / "evaluation.json").exists():
             return code
     say(f"campaign: every run of {shown(CAMPAIGN)} is complete and evaluated")

@@ -222,5 +222,26 @@ def test_the_campaign_takes_only_its_budget_and_threads():
     result = subprocess.run([sys.executable, "experiments/paper.py", "campaign", "--budget", "5", "--seed", "2"],
                             cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=120)
     assert result.returncode == 2 and result.stderr.strip() == (
-        "paper.py: error: campaign takes --budget MINUTES (and --threads), and its runs from "
+        "paper.py: error: campaign takes --budget MINUTES (and --threads) or --status, and its runs from "
         "experiments/paper/campaign.toml, not --seed")
+
+
+def test_the_status_says_how_far_each_run_got(tmp_path, monkeypatch, capsys):
+    import experiments.paper as paper_script
+
+    entries = tmp_path / "campaign.toml"
+    entries.write_text('runs = ["carracing static --seed 1 --popsize 4 --generations 3", "ant static --seed 1"]\n')
+    monkeypatch.setattr(paper_script, "CAMPAIGN", entries)
+    monkeypatch.setattr(paper_script, "RESULTS", tmp_path / "results")
+    chunk = paper(*("carracing", "static", "--popsize", "4", "--generations", "3", "--episodes", "1"),
+                  folder=tmp_path / "results" / "carracing_static_seed1", budget=10)
+    assert chunk.returncode == 0, chunk.stderr[-2000:]
+    assert paper_script.main(["campaign", "--status"]) == 0
+    first, second = capsys.readouterr().out.strip().splitlines()
+    run = run_of(tmp_path / "results" / "carracing_static_seed1")
+    with open(run / "metrics.csv", newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    hours = sum(float(row["seconds"]) for row in rows) / 3600
+    assert first.startswith(f"carracing static seed 1: {run}: generation 3 of 3 (evaluated); {hours:.2f} h of training")
+    assert f"population mean {float(rows[-1]['fitness_mean']):.1f}" in first
+    assert second == "ant static seed 1: not started"
