@@ -67,8 +67,9 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
                     formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:]))
     parser.add_argument("experiment", choices=(*EXPERIMENTS, "campaign"),
                         help="an experiment, or campaign: the next runs of experiments/paper/campaign.toml (--budget)")
-    parser.add_argument("kind", nargs="?", choices=(*TRAIN_SCRIPTS, "report"),
-                        help="train and evaluate one kind, or report: compare the kinds over their seeds")
+    parser.add_argument("kind", nargs="?", choices=(*TRAIN_SCRIPTS, "report", "curves"),
+                        help="train and evaluate one kind; report: compare the kinds over their seeds; curves: "
+                             "both kinds' training curves in one figure, <folder of the runs>/<experiment>_curves.png")
     parser.add_argument("--seed", type=seed_value, default=None, help="seed of the training run (default: the file's)")
     parser.add_argument("--popsize", type=positive_int, default=None, help="default: the file's")
     parser.add_argument("--generations", type=positive_int, default=None,
@@ -170,6 +171,23 @@ def run(command: list[str], dry_run: bool) -> int:
 
 
 
+def training_curves(args: argparse.Namespace) -> int:
+    """Every seed's newest run of both kinds, each as population mean, centre and best so far, in one figure."""
+    from es import files
+    from report import plots
+
+    runs = [(f"{kind} seed {folder.name.rsplit('seed', 1)[1]}", files.read_metrics(run / "metrics.csv"))
+            for kind in TRAIN_SCRIPTS for folder in sorted(args.runs.glob(f"{args.experiment}_{kind}_seed*"))
+            if (run := latest_run(folder)) is not None and (run / "metrics.csv").exists()]
+    if not runs:
+        print(f"paper.py: error: no {args.experiment} run in {args.runs}; train one first", file=sys.stderr)
+        return 2
+    out = args.runs / f"{args.experiment}_curves.png"
+    plots.save_comparison(out, runs)
+    say(f"wrote {shown(out)} ({', '.join(label for label, _ in runs)})")
+    return 0
+
+
 def report(args: argparse.Namespace) -> int:
     """Static against Hebbian: each seed's newest run, scored by its evaluation.json, per evaluation environment."""
     from report import stats
@@ -206,6 +224,8 @@ def main(argv: list[str] | None = None) -> int:
         return status() if args.status else run_queue(args)
     if args.kind == "report":
         return report(args)
+    if args.kind == "curves":
+        return training_curves(args)
     deadline = time.monotonic() + 60 * args.budget if args.budget is not None else None
     return experiment_main(args, deadline)
 

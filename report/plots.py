@@ -77,11 +77,13 @@ def run_figure(rows: Sequence[dict], title: str):
 
 
 def comparison_figure(runs: Sequence[tuple[str, Sequence[dict]]]):
-    """Several runs: each one's mean (solid) and best so far (dashed) in its own colour."""
-    figure, axes = _figure("mean (solid) and best so far (dashed)")
+    """Several runs: each one's population mean (solid), centre return (dotted) and best so far (dashed) in its
+    own colour."""
+    figure, axes = _figure("population mean (solid), centre (dotted), best so far (dashed)")
     for number, (label, rows) in enumerate(runs):
         data, colour = curves(rows), f"C{number % 10}"
         axes.plot(data["generation"], data["mean"], color=colour, label=label)
+        axes.plot(data["generation"], data["center"], color=colour, linestyle=":", linewidth=1)
         axes.plot(data["generation"], data["best"], color=colour, linestyle="--")
     _legend_outside(axes)
     return figure

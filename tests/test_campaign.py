@@ -245,3 +245,7 @@ def test_the_status_says_how_far_each_run_got(tmp_path, monkeypatch, capsys):
     assert first.startswith(f"carracing static seed 1: {run}: generation 3 of 3 (evaluated); {hours:.2f} h of training")
     assert f"population mean {float(rows[-1]['fitness_mean']):.1f}" in first
     assert second == "ant static seed 1: not started"
+    assert paper_script.main(["carracing", "curves", "--runs", str(tmp_path / "results")]) == 0
+    assert capsys.readouterr().out.strip() == f"wrote {tmp_path / 'results' / 'carracing_curves.png'} (static seed 1)"
+    assert (tmp_path / "results" / "carracing_curves.png").read_bytes().startswith(b"\x89PNG")
+    assert paper_script.main(["ant", "curves", "--runs", str(tmp_path / "results")]) == 2
