@@ -9,6 +9,7 @@ where only the settings declared resumable may be given other values (``TrainCon
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import secrets
 import sys
@@ -24,12 +25,12 @@ from envs import ProblemSpec
 from envs.modules import resume_imports
 from es.interrupts import honour_sigint
 from es.loop import NonFiniteUpdate, Status, Trainer
-from es.runfolder import RunFolder, SaveError, release_locks
+from es.runfolder import Checkpoint, RunFolder, RunFolderError, SaveError, release_locks, settings_record
 from es.settings import ESSettings
 from report import tensorboard
 from report.log import FitnessPlot, GenerationLog
 from report.progress import display_for
-from settings import type_problem, unmet_requirement
+from settings import contradictions, type_problem, unmet_requirement
 
 EXIT_CODES = {Status.DONE: 0, Status.FAILED: 1, Status.INTERRUPTED: 130}
 
@@ -158,10 +159,36 @@ def checked_resume(kind: str, args: argparse.Namespace) -> tuple[TrainConfig, Ru
                         f"{', '.join(item.label for item in resumable)} may change): start a new run instead") from None
     except ValueError as error:  # a resumable value out of range
         raise UserError(str(error)) from None
-    folder.check_resumable(config.es, config.policy.obs_norm)  # the checkpoint against config.json, before any write
-    if imports := resume_imports(config.env.env_ids, config.env.recipe_modules, str(folder.path / "config.json")):
-        say(imports)  # only plain module names outside the standard library are imported
+    checkpoint = folder.check_resumable(config.es, config.policy.obs_norm)  # against config.json, before any write
+    # only plain module names outside the standard library are imported
+    imports = resume_imports(config.env.env_ids, config.env.recipe_modules, str(folder.path / "config.json"))
+    edited = edited_settings(checkpoint, config)
+    if edited:
+        raise UserError(f"--resume {folder.path}: config.json differs from the settings its checkpoint was written "
+                        f"under: {', '.join(edited)}; a resumed run keeps its settings (only "
+                        f"{', '.join(item.label for item in resumable)} may change): put config.json back as it was, "
+                        "or start a new run")
+    if imports:
+        say(imports)
     return resumed, folder
+
+
+def edited_settings(checkpoint: Checkpoint, config: TrainConfig) -> list[str]:
+    """The settings of ``config`` (a run's config.json) a resume may not change that differ from those the
+    checkpoint was written under: '--popsize 8 (the run has 4)', ...; none for a checkpoint written before
+    checkpoints recorded them. A setting the record lacks (declared since) must hold its default."""
+    if not checkpoint.settings:
+        return []
+    current = json.loads(settings_record(config.fixed()))  # as the record holds values: lists, not tuples
+    try:
+        recorded = json.loads(checkpoint.settings)
+    except ValueError:
+        recorded = None
+    if not isinstance(recorded, dict):
+        raise RunFolderError("cannot resume: the checkpoint's record of the run's settings is not a JSON object; "
+                             "the checkpoint was damaged")
+    defaults = json.loads(settings_record({item.name: item.default for item in declared()}))
+    return contradictions({name: recorded.get(name, defaults.get(name)) for name in current}, current, declared())
 
 
 def check_tensorboard(config: TrainConfig) -> None:
@@ -197,11 +224,13 @@ def write_config(trainer: Trainer, config: TrainConfig, problem, command: list[s
     folder = trainer.folder
     earlier = folder.read_config() if (folder.path / "config.json").exists() else {}
     line = " ".join(command)
-    data = TrainConfig(trainer.es, config.policy, config.env, config.run).to_dict()
+    settings = TrainConfig(trainer.es, config.policy, config.env, config.run)
+    data = settings.to_dict()
     data.update(command=earlier.get("command", line), resumed=earlier.get("resumed", []) + ([line] if earlier else []),
                 versions=versions(), num_params=trainer.policy.num_params, layout=trainer.policy.layout.describe(),
                 workers=trainer.evaluator.workers, wrappers=problem.wrappers())
     folder.write_config(data)
+    folder.settings = settings_record(settings.fixed())  # what its checkpoints record from now on
 
 
 def start(config: TrainConfig, folder: RunFolder | None) -> tuple[Trainer, object]:

@@ -180,8 +180,7 @@ def write_json(path: Path, data: dict) -> None:
 
 
 def read_json(path: Path) -> dict:
-    with open(path) as handle:
-        return json.load(handle)
+    return json.loads(_read_regular(path))
 
 
 METRICS_COLUMNS = ("generation", "fitness_mean", "fitness_max", "fitness_min", "fitness_std",
@@ -205,5 +204,29 @@ def write_metrics(path: Path, rows: list[dict], extra_columns: tuple[str, ...] =
 
 
 def read_metrics(path: Path) -> list[dict]:
+    return list(csv.DictReader(io.StringIO(_read_regular(path), newline="")))
+
+
+def read_whole_metrics(path: Path) -> tuple[list[dict], int | None]:
+    """The rows of metrics.csv before the first damaged one, and that row's line (None if there is none).
+    A row is damaged when it lacks fields or has fields too many, or is the last and has no line end: a
+    file cut mid-row (every write is atomic, so only damage from outside cuts one)."""
+    text = _read_regular(path)
+    reader = csv.DictReader(io.StringIO(text, newline=""))
+    rows = []
+    for row in reader:
+        if None in row or None in row.values():
+            return rows, reader.line_num
+        rows.append(row)
+    if text and not text.endswith("\n"):
+        return rows[:-1], reader.line_num
+    return rows, None
+
+
+def _read_regular(path: Path) -> str:
+    """A text file's content; a folder, a device or a named pipe (which would block a read) is refused."""
+    path = Path(path)
+    if path.exists() and not path.is_file():
+        raise FileFormatError(f"{path} is not a regular file (a folder, a device or a pipe)")
     with open(path, newline="") as handle:
-        return list(csv.DictReader(handle))
+        return handle.read()
