@@ -9,6 +9,7 @@ written with numpy 1), so a file that would run code when unpickled is refused.
 from __future__ import annotations
 
 import csv
+import errno
 import io
 import json
 import os
@@ -78,13 +79,27 @@ def save_dat(path: Path, array: np.ndarray) -> None:
     staging = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"))
     try:
         staged = staging / path.name
-        torch.save(np.asarray(array, dtype=np.float32), staged)
+        array = np.asarray(array, dtype=np.float32)
+        try:
+            torch.save(array, staged)
+        except RuntimeError as error:  # torch's writer reports a failed write without its errno
+            raise write_failure(staging, array.nbytes, error) from None
         os.chmod(staged, _FILE_MODE)
         with open(staged, "rb") as handle:
             os.fsync(handle.fileno())
         os.replace(staged, path)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
+
+
+def write_failure(folder: Path, size: int, error: Exception) -> OSError:
+    """The OSError behind a library's failed write of ``size`` bytes into ``folder``: a full disk, known by
+    the space left, or the library's own words."""
+    stats = os.statvfs(folder)
+    if stats.f_bavail * stats.f_frsize < size:
+        return OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    words = str(error).strip().splitlines()
+    return OSError(errno.EIO, f"{type(error).__name__}: {words[0] if words else 'the write failed'}")
 
 
 def _numpy_safe_globals() -> list:
