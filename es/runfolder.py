@@ -452,6 +452,13 @@ def check_metrics(rows: list[dict], generation: int, path: Path) -> None:
                              f" where the checkpoint has run {generation}; restore the run's own metrics.csv")
 
 
-def reward_label(mean_fitness: float) -> int:
-    """The ``rew_`` part of the original file names: int of the mean fitness (0 if not finite)."""
-    return int(mean_fitness) if math.isfinite(mean_fitness) else 0
+LABEL_DIGITS = 15  # a float64 holds 15 significant digits: an integer part longer than that is noise
+
+
+def reward_label(mean_fitness: float) -> int | str:
+    """The ``rew_`` part of the original file names: int of the mean fitness (0 if not finite), as the
+    original; beyond 15 digits its three leading digits and exponent (``-1.71e+308``), so that a name
+    stays short whatever the reward."""
+    if not math.isfinite(mean_fitness):
+        return 0
+    return int(mean_fitness) if abs(mean_fitness) < 10**LABEL_DIGITS else f"{mean_fitness:.3g}"

@@ -370,7 +370,7 @@ def test_fitness_values_are_float32_and_dat_archives_are_named_after_their_file(
 
 
 @pytest.mark.parametrize("toml, named", [
-    ("[es]\nsigma = 0", "--sigma must be a number > 0, got 0"),
+    ("[es]\nsigma = 0", "--sigma must be in (0, 3.40282e+38], got 0"),
     ("[es]\nlr = \"0.1\"", "--lr must be a number, got '0.1'"),
     ("[es]\ndecay = 2.0", "--decay must be in (0, 1], got 2.0"),
     ("[es]\nepisodes = 0", "--episodes must be a whole number >= 1, got 0"),
