@@ -17,6 +17,7 @@ exclusive ``flock`` on its ``.lock`` file until it exits, so a second process ca
 
 from __future__ import annotations
 
+import errno
 import fcntl
 import hashlib
 import io
@@ -24,6 +25,7 @@ import json
 import math
 import os
 import shutil
+import stat
 import time
 import typing
 from collections.abc import Callable
@@ -196,7 +198,7 @@ class RunFolder:
     def lock(self) -> None:
         """Hold ``.lock`` (flock, exclusive) until this process exits; refuse a folder another process holds."""
         try:
-            descriptor = os.open(self.path / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
+            descriptor = _open_lock(self.path / LOCK_FILE, os.O_RDWR | os.O_CREAT)
         except OSError as error:
             raise RunFolderError(f"cannot lock {self.path}: {error.strerror or error}") from None
         try:
@@ -359,12 +361,24 @@ def release_locks() -> None:
         os.close(_HELD_LOCKS.pop())
 
 
+def _open_lock(path: Path, flags: int) -> int:
+    """A descriptor of the lock file at ``path``; an OSError if it is not a regular file (a named pipe, whose
+    opening would block, is opened without blocking, then refused)."""
+    descriptor = os.open(path, flags | os.O_NONBLOCK, 0o644)
+    if not stat.S_ISREG(os.fstat(descriptor).st_mode):
+        os.close(descriptor)
+        raise OSError(errno.EINVAL, f"{path} is not a regular file; remove it")
+    return descriptor
+
+
 def _locked_elsewhere(path: Path) -> bool:
     """Whether another process holds the lock at ``path`` (tested with a shared lock, released at once)."""
     try:
-        descriptor = os.open(path, os.O_RDONLY)
+        descriptor = _open_lock(path, os.O_RDONLY)
     except FileNotFoundError:
         return False
+    except OSError as error:
+        raise RunFolderError(f"cannot lock {path.parent}: {error.strerror or error}") from None
     try:
         fcntl.flock(descriptor, fcntl.LOCK_SH | fcntl.LOCK_NB)
         return False

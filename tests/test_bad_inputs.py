@@ -380,6 +380,8 @@ CASES = {
                                       cut_metrics(run)),
     "a named pipe as metrics.csv": Case(resume, "metrics.csv is not a regular file",
                                         prepare=lambda run, work: metrics_as_pipe(run)),
+    "a named pipe as the lock file": Case(resume, ".lock is not a regular file",
+                                          prepare=lambda run, work: os.mkfifo(run / ".lock")),
     "a damaged record of the settings": Case(resume, "does not match its digest",
                                              prepare=lambda run, work: damage_settings_record(run)),
     "a checkpoint that is not one": Case(resume, "not a readable checkpoint",
