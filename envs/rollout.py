@@ -11,9 +11,9 @@ import numpy as np
 
 
 class NonFiniteValues(ValueError):
-    """An episode met NaN or infinity where no result can come from it: an observation after reset, or the
-    observation or the network's output of a step that then failed. ``non_finite`` names which (the
-    training's workers, ``es.worker``, know it by that attribute alone)."""
+    """An episode met NaN or infinity where no result can come from it: an observation after reset or after
+    the last step, or the observation or the network's output of a step that then failed. ``non_finite``
+    names which (the training's workers, ``es.worker``, know it by that attribute alone)."""
 
     def __init__(self, non_finite: str, message: str):
         super().__init__(message)
@@ -84,4 +84,7 @@ def rollout(env: gym.Env, policy, params: np.ndarray, seed: int,
             raise NonFiniteValues("output", f"the network's output at step {steps + 1} is not finite: "
                                             f"{shown(output)}; the step failed with {failure}") from error
         raise
+    if non_finite(observation):  # and once at its end: where it shows mid-episode, it mostly stays
+        raise NonFiniteValues("observations", f"the observation after the last step ({steps}) is not finite: "
+                                              f"{shown(observation)}")
     return Episode(float(total), steps + burn_in, state)

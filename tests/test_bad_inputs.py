@@ -408,6 +408,10 @@ CASES = {
         new_run("--environment", "tests.failing_env:FailingEnv-v0"),
         "FailingEnv-v0 failed in generation 1 with non-finite observations for member 0",
         env={"FAILING_ENV_HOW": "nan_obs", "FAILING_ENV_STEP": "0"}, creates="new"),
+    "an environment whose observations turn NaN": Case(
+        new_run("--environment", "tests.failing_env:FailingEnv-v0"),
+        "FailingEnv-v0 failed in generation 1 with non-finite observations for member 0",
+        env={"FAILING_ENV_HOW": "nan_obs", "FAILING_ENV_STEP": "3"}, creates="new"),
     "an lr whose step leaves float32": Case(new_run("--environment", "CartPole-v1", "--lr", "1e308"),
                                             "generation 1: the update is not finite (lr 1e+308", creates="new"),
     "a module that raises when imported": Case(
