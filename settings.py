@@ -54,6 +54,9 @@ SEED_RANGE = (0, 2**31 - 1)  # every seed the project takes: numpy's and Gymnasi
 # from 2**31 on, which no training episode uses); Gymnasium seeds an episode from any of them
 EPISODE_SEED_RANGE = (0, 2**32 - 1)
 ANY = object()  # ``requires=("eval_every", ANY)``: any value but off (False, None)
+# the largest float32: the parameters are float32, and so is the fitness the original's Fitness_values file
+# records; a scale above it (--sigma, --fitness_l2) overflows them for any value of magnitude 1 or more
+FLOAT32_MAX = 3.4028234663852886e38
 
 
 @dataclasses.dataclass(frozen=True)

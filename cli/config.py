@@ -96,6 +96,13 @@ class TrainConfig:
             changed[name] = replace(getattr(self, name), **mine) if mine else getattr(self, name)
         return TrainConfig(**changed)
 
+    def fixed(self) -> dict:
+        """The settings a resume may not change, flat (``{"popsize": 4, ...}``): what a checkpoint records
+        of the settings it was written under (``es.runfolder.settings_record``)."""
+        resumable = {item.name for item in declared() if item.spec.resumable}
+        return {key: value for section in self.to_dict().values() for key, value in section.items()
+                if key not in resumable}
+
     def value(self, name: str):
         """A field by name, whichever section holds it."""
         return getattr(getattr(self, section_of(name)), name)

@@ -9,6 +9,7 @@ where only the settings declared resumable may be given other values (``TrainCon
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import secrets
 import sys
@@ -22,14 +23,15 @@ from cli.flags import add_settings, defaults, given, non_empty
 from cli.hints import evaluate_hint, resume_hint
 from envs import ProblemSpec
 from envs.modules import resume_imports
+from es.backends import NonFiniteEpisode
 from es.interrupts import honour_sigint
 from es.loop import NonFiniteUpdate, Status, Trainer
-from es.runfolder import RunFolder, SaveError, release_locks
+from es.runfolder import Checkpoint, RunFolder, RunFolderError, SaveError, release_locks, settings_record
 from es.settings import ESSettings
 from report import tensorboard
 from report.log import FitnessPlot, GenerationLog
 from report.progress import display_for
-from settings import type_problem, unmet_requirement
+from settings import contradictions, type_problem, unmet_requirement
 
 EXIT_CODES = {Status.DONE: 0, Status.FAILED: 1, Status.INTERRUPTED: 130}
 
@@ -158,10 +160,36 @@ def checked_resume(kind: str, args: argparse.Namespace) -> tuple[TrainConfig, Ru
                         f"{', '.join(item.label for item in resumable)} may change): start a new run instead") from None
     except ValueError as error:  # a resumable value out of range
         raise UserError(str(error)) from None
-    folder.check_resumable(config.es, config.policy.obs_norm)  # the checkpoint against config.json, before any write
-    if imports := resume_imports(config.env.env_ids, config.env.recipe_modules, str(folder.path / "config.json")):
-        say(imports)  # only plain module names outside the standard library are imported
+    checkpoint = folder.check_resumable(config.es, config.policy.obs_norm)  # against config.json, before any write
+    # only plain module names outside the standard library are imported
+    imports = resume_imports(config.env.env_ids, config.env.recipe_modules, str(folder.path / "config.json"))
+    edited = edited_settings(checkpoint, config)
+    if edited:
+        raise UserError(f"--resume {folder.path}: config.json differs from the settings its checkpoint was written "
+                        f"under: {', '.join(edited)}; a resumed run keeps its settings (only "
+                        f"{', '.join(item.label for item in resumable)} may change): put config.json back as it was, "
+                        "or start a new run")
+    if imports:
+        say(imports)
     return resumed, folder
+
+
+def edited_settings(checkpoint: Checkpoint, config: TrainConfig) -> list[str]:
+    """The settings of ``config`` (a run's config.json) a resume may not change that differ from those the
+    checkpoint was written under: '--popsize 8 (the run has 4)', ...; none for a checkpoint written before
+    checkpoints recorded them. A setting the record lacks (declared since) must hold its default."""
+    if not checkpoint.settings:
+        return []
+    current = json.loads(settings_record(config.fixed()))  # as the record holds values: lists, not tuples
+    try:
+        recorded = json.loads(checkpoint.settings)
+    except ValueError:
+        recorded = None
+    if not isinstance(recorded, dict):
+        raise RunFolderError("cannot resume: the checkpoint's record of the run's settings is not a JSON object; "
+                             "the checkpoint was damaged")
+    defaults = json.loads(settings_record({item.name: item.default for item in declared()}))
+    return contradictions({name: recorded.get(name, defaults.get(name)) for name in current}, current, declared())
 
 
 def check_tensorboard(config: TrainConfig) -> None:
@@ -197,11 +225,13 @@ def write_config(trainer: Trainer, config: TrainConfig, problem, command: list[s
     folder = trainer.folder
     earlier = folder.read_config() if (folder.path / "config.json").exists() else {}
     line = " ".join(command)
-    data = TrainConfig(trainer.es, config.policy, config.env, config.run).to_dict()
+    settings = TrainConfig(trainer.es, config.policy, config.env, config.run)
+    data = settings.to_dict()
     data.update(command=earlier.get("command", line), resumed=earlier.get("resumed", []) + ([line] if earlier else []),
                 versions=versions(), num_params=trainer.policy.num_params, layout=trainer.policy.layout.describe(),
                 workers=trainer.evaluator.workers, wrappers=problem.wrappers())
     folder.write_config(data)
+    folder.settings = settings_record(settings.fixed())  # what its checkpoints record from now on
 
 
 def start(config: TrainConfig, folder: RunFolder | None) -> tuple[Trainer, object]:
@@ -262,11 +292,10 @@ def train_main(kind: str, parser: Parser, argv: list[str] | None = None) -> int:
             write_config(trainer, config, problem, [parser.prog, *argv])  # the new settings and the command
         log(f"run folder: {trainer.folder.path} | environment: {', '.join(config.env.env_ids)} | parameters: "
             f"{trainer.policy.num_params} | workers: {trainer.evaluator.workers} | seed: {config.run.seed}")
-        status = trainer.train()
-        report_end(trainer, config, status)
-        return EXIT_CODES[status]
+        return report_end(trainer, config, trainer.train(), parser.prog)
     except (*USER_ERRORS, SaveError) as error:  # SaveError here: before training started
-        print(f"{parser.prog}: error: {error}", file=sys.stderr)
+        kept = f"; {after_failed_save(config, trainer.folder)}" if isinstance(error, SaveError) and trainer else ""
+        print(f"{parser.prog}: error: {error}{kept}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         resume = (f" (resume with: {resume_hint(config, trainer.folder.path)})"
@@ -279,9 +308,11 @@ def train_main(kind: str, parser: Parser, argv: list[str] | None = None) -> int:
         release_locks()  # the run folder's lock, for the next run in this process
 
 
-def report_end(trainer: Trainer, config: TrainConfig, status: Status) -> None:
-    """The run's last line: how to evaluate it, or how to resume it."""
-    folder = trainer.folder
+def report_end(trainer: Trainer, config: TrainConfig, status: Status, prog: str) -> int:
+    """The run's last line, and the exit code: how to evaluate it, or how to resume it; or, where a resume
+    would meet the same failure (NaN or infinity) or first needs space (a failed write), one line on
+    stderr saying why and what was kept, exit code 2."""
+    folder, failure = trainer.folder, trainer.failure
     if status is Status.DONE:
         # ``best`` only with --eval_every: otherwise it is the centre with the best single-episode
         # return, a noisy choice.
@@ -290,14 +321,34 @@ def report_end(trainer: Trainer, config: TrainConfig, status: Status) -> None:
     elif status is Status.INTERRUPTED:
         log(f"interrupted after generation {trainer.state.generation}; resume with: "
             f"{resume_hint(config, folder.path)}")
-    elif folder.checkpoint_generation is None:
-        log("stopped; no checkpoint could be written")
-    elif isinstance(trainer.failure, NonFiniteUpdate):  # resuming would take the same step again
-        log(f"stopped; the checkpoint holds generation {folder.checkpoint_generation}; start a new run with a "
-            "lower --lr or a larger --sigma")
+    elif isinstance(failure, SaveError):
+        print(f"{prog}: error: {failure}; {after_failed_save(config, folder)}", file=sys.stderr)
+        return 2
+    elif isinstance(failure, (NonFiniteUpdate, NonFiniteEpisode)):
+        advice = NON_FINITE_ADVICE[failure.what if isinstance(failure, NonFiniteEpisode) else "update"]
+        print(f"{prog}: error: {failure}; the checkpoint holds generation {folder.checkpoint_generation}; a resume "
+              f"would meet it again: {advice}", file=sys.stderr)
+        return 2
     else:
-        log(f"stopped; the checkpoint holds generation {folder.checkpoint_generation}; "
+        log(f"error: {failure}")
+        log("stopped; no checkpoint could be written" if folder.checkpoint_generation is None else
+            f"stopped; the checkpoint holds generation {folder.checkpoint_generation}; "
             f"resume with: {resume_hint(config, folder.path)}")
+    return EXIT_CODES[status]
+
+
+NON_FINITE_ADVICE = {"update": "start a new run with a lower --lr or a larger --sigma",
+                     "parameters": "start a new run with a smaller --sigma",
+                     "output": "start a new run with a smaller --sigma (the network's output overflowed)",
+                     "observations": "the environment returned them; fix it, then start a new run"}
+
+
+def after_failed_save(config: TrainConfig, folder: RunFolder) -> str:
+    """What a failed write (a full disk, a folder made read-only) kept, and what to do."""
+    if folder.checkpoint_generation is None:
+        return f"no checkpoint was written in {folder.path}; make space, then start the run again"
+    return (f"{folder.path} keeps its checkpoint of generation {folder.checkpoint_generation} (every write is "
+            f"atomic: no file is torn); make space, then resume with: {resume_hint(config, folder.path)}")
 
 
 def log(line: str) -> None:

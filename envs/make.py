@@ -61,8 +61,10 @@ def resolve_env_id(env_id: str, notify=print) -> str:
         module, _, rest = env_id.partition(":")
         try:
             importlib.import_module(module)
-        except ImportError as error:
-            raise EnvironmentError_(f"cannot import {module!r} for environment {env_id!r}: {error}") from None
+        except Exception as error:  # not found, or its own code raised while it was imported
+            first = (str(error).strip().splitlines() or [""])[0]
+            reason = first if isinstance(error, ImportError) else f"{type(error).__name__}: {first}"
+            raise EnvironmentError_(f"cannot import {module!r} for environment {env_id!r}: {reason}") from None
         env_id, prefix = rest, f"{module}:"
     registry = gym.registry
     if env_id in registry and _usable(registry[env_id]):

@@ -9,6 +9,7 @@ written with numpy 1), so a file that would run code when unpickled is refused.
 from __future__ import annotations
 
 import csv
+import errno
 import io
 import json
 import os
@@ -78,13 +79,27 @@ def save_dat(path: Path, array: np.ndarray) -> None:
     staging = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"))
     try:
         staged = staging / path.name
-        torch.save(np.asarray(array, dtype=np.float32), staged)
+        array = np.asarray(array, dtype=np.float32)
+        try:
+            torch.save(array, staged)
+        except RuntimeError as error:  # torch's writer reports a failed write without its errno
+            raise write_failure(staging, array.nbytes, error) from None
         os.chmod(staged, _FILE_MODE)
         with open(staged, "rb") as handle:
             os.fsync(handle.fileno())
         os.replace(staged, path)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
+
+
+def write_failure(folder: Path, size: int, error: Exception) -> OSError:
+    """The OSError behind a library's failed write of ``size`` bytes into ``folder``: a full disk, known by
+    the space left, or the library's own words."""
+    stats = os.statvfs(folder)
+    if stats.f_bavail * stats.f_frsize < size:
+        return OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    words = str(error).strip().splitlines()
+    return OSError(errno.EIO, f"{type(error).__name__}: {words[0] if words else 'the write failed'}")
 
 
 def _numpy_safe_globals() -> list:
@@ -180,8 +195,7 @@ def write_json(path: Path, data: dict) -> None:
 
 
 def read_json(path: Path) -> dict:
-    with open(path) as handle:
-        return json.load(handle)
+    return json.loads(_read_regular(path))
 
 
 METRICS_COLUMNS = ("generation", "fitness_mean", "fitness_max", "fitness_min", "fitness_std",
@@ -205,5 +219,29 @@ def write_metrics(path: Path, rows: list[dict], extra_columns: tuple[str, ...] =
 
 
 def read_metrics(path: Path) -> list[dict]:
+    return list(csv.DictReader(io.StringIO(_read_regular(path), newline="")))
+
+
+def read_whole_metrics(path: Path) -> tuple[list[dict], int | None]:
+    """The rows of metrics.csv before the first damaged one, and that row's line (None if there is none).
+    A row is damaged when it lacks fields or has fields too many, or is the last and has no line end: a
+    file cut mid-row (every write is atomic, so only damage from outside cuts one)."""
+    text = _read_regular(path)
+    reader = csv.DictReader(io.StringIO(text, newline=""))
+    rows = []
+    for row in reader:
+        if None in row or None in row.values():
+            return rows, reader.line_num
+        rows.append(row)
+    if text and not text.endswith("\n"):
+        return rows[:-1], reader.line_num
+    return rows, None
+
+
+def _read_regular(path: Path) -> str:
+    """A text file's content; a folder, a device or a named pipe (which would block a read) is refused."""
+    path = Path(path)
+    if path.exists() and not path.is_file():
+        raise FileFormatError(f"{path} is not a regular file (a folder, a device or a pipe)")
     with open(path, newline="") as handle:
-        return list(csv.DictReader(handle))
+        return handle.read()

@@ -286,9 +286,9 @@ class Trainer:
         return state
 
     def _stop(self, error: Exception) -> Status:
-        """Report what stopped the run, and checkpoint it if that still works."""
+        """Keep what stopped the run (``failure``, for the caller to report), and checkpoint it if that
+        still works."""
         self.failure = error
-        self.log(f"error: {error}")
         if not isinstance(error, SaveError):  # a failed save would most likely fail again
             try:
                 self.save_checkpoint()

@@ -17,15 +17,19 @@ exclusive ``flock`` on its ``.lock`` file until it exits, so a second process ca
 
 from __future__ import annotations
 
+import errno
 import fcntl
+import hashlib
 import io
+import json
 import math
 import os
 import shutil
+import stat
 import time
 import typing
 from collections.abc import Callable
-from dataclasses import MISSING, dataclass, field, fields
+from dataclasses import MISSING, dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -79,6 +83,10 @@ class Checkpoint:
     best_observations: dict[str, np.ndarray] = field(default_factory=dict)  # those best_theta was evaluated with
     episode_cap: int = 0  # --variable_ep_len: the next generation's cap (0: none)
     strategy: dict[str, np.ndarray] = field(default_factory=dict)  # the strategy's arrays (es.strategies)
+    # the settings it was written under but those a resume may change (``settings_record``), and their
+    # digest; empty in checkpoints written before they were recorded
+    settings: str = ""
+    settings_digest: str = ""
 
     @classmethod
     def of(cls, state: ESState, history: History, observations: RunningStat | None = None) -> Checkpoint:
@@ -130,6 +138,15 @@ def _decode(saved, name: str, kind: type):
     return kind(saved[name])
 
 
+def settings_record(values: dict) -> str:
+    """The text a checkpoint records of the settings it was written under: JSON, keys sorted."""
+    return json.dumps(values, sort_keys=True, separators=(",", ":"))
+
+
+def settings_digest(record: str) -> str:
+    return hashlib.sha256(record.encode()).hexdigest()
+
+
 def named_file(prefix: str, role: str) -> str:
     """``best.dat`` / ``last.dat`` for static weights, ``<prefix>_<role>.dat`` for Hebbian parts."""
     return f"{prefix}.dat" if role == "weights" else f"{prefix}_{role}.dat"
@@ -144,6 +161,7 @@ class RunFolder:
     path: Path
     checkpoint_generation: int | None = field(default=None)  # the generation checkpoint.npz holds
     made_parents: list[Path] = field(default_factory=list)  # the folders above it that creating it made
+    settings: str = ""  # the settings_record its checkpoints are written under (set with config.json)
 
     @classmethod
     def create(cls, folder: str | Path, label: str, seed: int) -> RunFolder:
@@ -180,7 +198,7 @@ class RunFolder:
     def lock(self) -> None:
         """Hold ``.lock`` (flock, exclusive) until this process exits; refuse a folder another process holds."""
         try:
-            descriptor = os.open(self.path / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
+            descriptor = _open_lock(self.path / LOCK_FILE, os.O_RDWR | os.O_CREAT)
         except OSError as error:
             raise RunFolderError(f"cannot lock {self.path}: {error.strerror or error}") from None
         try:
@@ -203,9 +221,9 @@ class RunFolder:
                 except OSError:
                     break
 
-    def check_resumable(self, es: ESSettings, obs_norm: bool) -> None:
+    def check_resumable(self, es: ESSettings, obs_norm: bool) -> Checkpoint:
         """Refuse, reading only, a checkpoint that does not fit the settings of config.json or its own
-        parts, or a folder another process holds (see the module docstring)."""
+        parts, or a folder another process holds (see the module docstring); the checkpoint, checked."""
         if _locked_elsewhere(self.path / LOCK_FILE):
             raise RunFolderError(f"{self.path} is in use by another process (it holds {self.path / LOCK_FILE}); "
                                  "wait for it to end, or stop it first")
@@ -216,6 +234,7 @@ class RunFolder:
             raise RunFolderError(f"cannot resume from {self.path / 'checkpoint.npz'}: it holds {checkpoint.theta.size} "
                                  f"parameters, and config.json's policy has {recorded}")
         check_metrics(self.read_metrics(checkpoint.generation), checkpoint.generation, self.path / "metrics.csv")
+        return checkpoint
 
     def write(self, write: Callable, name: str, *args) -> None:
         """``write(path / name, *args)``; an OSError becomes a SaveError naming the file."""
@@ -281,17 +300,31 @@ class RunFolder:
         self.write(files.write_metrics, "metrics.csv", rows, extra_columns)
 
     def read_metrics(self, up_to_generation: int) -> list[dict]:
-        """The rows up to a generation; rows a kill left after the checkpoint are dropped."""
+        """The rows up to a generation; rows a kill left after the checkpoint are dropped, and so is a
+        damaged row (cut short, or with fields too many) after them. A damaged row at or before the
+        checkpoint's generation is refused: it is never kept, half empty."""
         path = self.path / "metrics.csv"
+        if not path.exists():
+            return []
         try:
-            rows = files.read_metrics(path) if path.exists() else []
-            return [row for row in rows if int(row["generation"]) <= up_to_generation]
+            rows, damaged = files.read_whole_metrics(path)
+            kept = [row for row in rows if int(row["generation"]) <= up_to_generation]
+        except files.FileFormatError as error:  # not a regular file
+            raise RunFolderError(f"cannot resume: {error}; put the run's own metrics.csv back") from None
         except (KeyError, ValueError, TypeError) as error:
             raise RunFolderError(f"cannot resume: {path} is unreadable ({type(error).__name__}: {error})") from None
+        if damaged is not None and up_to_generation not in [0, *(int(row["generation"]) for row in rows)]:
+            raise RunFolderError(f"cannot resume: {path} is damaged at line {damaged} (a row cut short, or with fields "
+                                 f"too many), before the row of generation {up_to_generation}, the checkpoint's; "
+                                 "restore the run's own metrics.csv")
+        return kept
 
     # --- checkpoint ---------------------------------------------------------------------------
 
     def save_checkpoint(self, checkpoint: Checkpoint) -> None:
+        """checkpoint.npz, recording the settings it is written under (``settings``)."""
+        checkpoint = replace(checkpoint, settings=self.settings,
+                             settings_digest=settings_digest(self.settings) if self.settings else "")
         self.write(files.atomic_write_bytes, "checkpoint.npz", checkpoint.to_bytes())
         self.checkpoint_generation = checkpoint.generation
 
@@ -328,12 +361,24 @@ def release_locks() -> None:
         os.close(_HELD_LOCKS.pop())
 
 
+def _open_lock(path: Path, flags: int) -> int:
+    """A descriptor of the lock file at ``path``; an OSError if it is not a regular file (a named pipe, whose
+    opening would block, is opened without blocking, then refused)."""
+    descriptor = os.open(path, flags | os.O_NONBLOCK, 0o644)
+    if not stat.S_ISREG(os.fstat(descriptor).st_mode):
+        os.close(descriptor)
+        raise OSError(errno.EINVAL, f"{path} is not a regular file; remove it")
+    return descriptor
+
+
 def _locked_elsewhere(path: Path) -> bool:
     """Whether another process holds the lock at ``path`` (tested with a shared lock, released at once)."""
     try:
-        descriptor = os.open(path, os.O_RDONLY)
+        descriptor = _open_lock(path, os.O_RDONLY)
     except FileNotFoundError:
         return False
+    except OSError as error:
+        raise RunFolderError(f"cannot lock {path.parent}: {error.strerror or error}") from None
     try:
         fcntl.flock(descriptor, fcntl.LOCK_SH | fcntl.LOCK_NB)
         return False
@@ -355,8 +400,10 @@ def check_checkpoint(checkpoint: Checkpoint, es: ESSettings, obs_norm: bool, pat
         refuse(f"theta has shape {checkpoint.theta.shape}, not a vector of parameters")
     if checkpoint.generation < 0:
         refuse(f"generation {checkpoint.generation} is negative")
-    if len(checkpoint.fitness_log) != checkpoint.generation:
+    if len(checkpoint.fitness_log) > checkpoint.generation:  # one per save at a multiple of --print_every
         refuse(f"it has {len(checkpoint.fitness_log)} fitness values for {checkpoint.generation} generations")
+    if checkpoint.settings and settings_digest(checkpoint.settings) != checkpoint.settings_digest:
+        refuse("its record of the run's settings does not match its digest")
     if checkpoint.best_theta.size not in (0, dim):
         refuse(f"best_theta has {checkpoint.best_theta.size} values, theta {dim}")
     for name in ("lr", "sigma"):
@@ -419,6 +466,13 @@ def check_metrics(rows: list[dict], generation: int, path: Path) -> None:
                              f" where the checkpoint has run {generation}; restore the run's own metrics.csv")
 
 
-def reward_label(mean_fitness: float) -> int:
-    """The ``rew_`` part of the original file names: int of the mean fitness (0 if not finite)."""
-    return int(mean_fitness) if math.isfinite(mean_fitness) else 0
+LABEL_DIGITS = 15  # a float64 holds 15 significant digits: an integer part longer than that is noise
+
+
+def reward_label(mean_fitness: float) -> int | str:
+    """The ``rew_`` part of the original file names: int of the mean fitness (0 if not finite), as the
+    original; beyond 15 digits its three leading digits and exponent (``-1.71e+308``), so that a name
+    stays short whatever the reward."""
+    if not math.isfinite(mean_fitness):
+        return 0
+    return int(mean_fitness) if abs(mean_fitness) < 10**LABEL_DIGITS else f"{mean_fitness:.3g}"

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from es.optimizers import OPTIMIZERS
 from es.shaping import SHAPINGS
 from es.strategies import PGPE_OPTIMIZERS, STRATEGIES
-from settings import ANY, SEED_RANGE, check, setting
+from settings import ANY, FLOAT32_MAX, SEED_RANGE, check, setting
 
 BACKENDS = ("process", "ray")  # es.backends: a process pool on this machine, or Ray
 MODERN = "beyond the original algorithm (defaults: the original)"
@@ -41,13 +41,15 @@ class ESSettings:
     lr: float = setting(0.2, requires=OPENAI, low=0, low_open=True, help="ES learning rate")
     decay: float = setting(0.995, requires=OPENAI, low=0, high=1, low_open=True,
                            help="learning-rate decay per generation (while lr > lr_floor)")
-    sigma: float = setting(0.1, low=0, low_open=True, help="initial noise standard deviation")
+    sigma: float = setting(0.1, low=0, low_open=True, high=FLOAT32_MAX,
+                           help="initial noise standard deviation (the members theta + sigma * noise are float32)")
     lr_floor: float = setting(0.001, requires=OPENAI, flag=None, low=0, help="lr decays while above this")
     sigma_decay: float = setting(0.999, requires=OPENAI, flag=None, low=0, high=1, low_open=True,
                                  help="sigma *= sigma_decay per generation while sigma > sigma_floor")
     sigma_floor: float = setting(0.01, requires=OPENAI, flag=None, low=0, help="sigma decays while above this")
-    fitness_l2: float = setting(0.01, low=0, metavar="C", group=MODERN,
-                                help="the original's L2 penalty in the fitness: return - C * mean(theta_m^2)")
+    fitness_l2: float = setting(0.01, low=0, high=FLOAT32_MAX, metavar="C", group=MODERN,
+                                help="the original's L2 penalty in the fitness: return - C * mean(theta_m^2) "
+                                     "(recorded in float32)")
     episodes: int = setting(1, low=1, metavar="E", help="episodes per fitness evaluation (the fitness is their mean)")
     noise_size: int | None = setting(None, flag=None, low=1,
                                      help="floats in the noise table; default: sized to the parameter count")

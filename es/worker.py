@@ -21,6 +21,7 @@ the policy acted on, for a task with ``record_obs`` set, and None otherwise.
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Callable
 
@@ -32,7 +33,9 @@ from es.shaping import l2_penalty
 TASK_DTYPE = np.dtype([("member", np.int64), ("noise_index", np.int64), ("sign", np.int64),
                        ("env_index", np.int64), ("seed", np.int64), ("record_obs", np.int64),
                        ("max_steps", np.int64)])  # max_steps: the episode's cap on policy steps, 0 for none
-Outcome = tuple[str, object]  # ("result", (return, steps, penalty, observation sums)) or ("error", message)
+# ("result", (return, steps, penalty, observation sums)), ("error", message), or ("nonfinite", (generation,
+# what, message)): the member's parameters, or an observation or output of its episode, NaN or infinite
+Outcome = tuple[str, object]
 Statistics = tuple[np.ndarray, np.ndarray]  # (mean, std) of the observations, as published
 
 
@@ -71,10 +74,12 @@ def pin_threads() -> None:
 
 def perturb(theta: np.ndarray, epsilon: np.ndarray, sign: int, sigma: float | np.ndarray) -> np.ndarray:
     """A member's parameters, theta + sign * sigma * epsilon, in float32; ``sigma`` a number or a
-    float32 vector (a per-parameter sigma)."""
-    if isinstance(sigma, np.ndarray):
-        return theta + (np.float32(sign) * sigma) * epsilon
-    return theta + np.float32(sign * sigma) * epsilon
+    float32 vector (a per-parameter sigma). A sum beyond float32's range is infinite, without a warning:
+    ``Worker.run`` names such a member's parameters."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        if isinstance(sigma, np.ndarray):
+            return theta + (np.float32(sign) * sigma) * epsilon
+        return theta + np.float32(sign * sigma) * epsilon
 
 
 class Worker:
@@ -110,11 +115,15 @@ class Worker:
         return self._params
 
     def run(self, generation: int, sigma: float, task: np.void, statistics: Statistics | None = None) -> Outcome:
-        """("result", (return, steps, penalty, observation sums)), or ("error", message) after remaking
-        the environment. ``statistics``: the published (mean, std) of the observations, with --obs_norm."""
+        """("result", (return, steps, penalty, observation sums)), ("error", message) after remaking the
+        environment, or ("nonfinite", (generation, what, message)) where the member's parameters, or an
+        observation or output that failed its episode, are NaN or infinite. ``statistics``: the published
+        (mean, std) of the observations, with --obs_norm."""
         env_index = int(task["env_index"])
         try:
             params = self.params(generation, sigma, int(task["member"]), int(task["noise_index"]), int(task["sign"]))
+            if not math.isfinite(self._penalty):  # mean(params^2) in float64: not finite only if a parameter is not
+                return "nonfinite", (generation + 1, "parameters", self._non_finite_parameters(params, sigma))
             policy = self.problem.policy
             if statistics is not None:
                 policy.observe(statistics)
@@ -122,12 +131,23 @@ class Worker:
             sums = policy.observation_sums(episode.state) if statistics is not None and task["record_obs"] else None
             return "result", (episode.total_return, episode.steps, self._penalty, sums)
         except Exception as error:  # reported to the runner, which retries once, then stops the run
+            if getattr(error, "non_finite", None):  # NaN or infinity in the episode (envs.rollout.NonFiniteValues)
+                return "nonfinite", (generation + 1, error.non_finite, str(error))  # it would recur: not retried
             message = f"{type(error).__name__}: {error}"
             try:
                 self.problem.rebuild(env_index)
             except Exception as rebuild_error:
                 message += f" (and remaking the environment failed: {rebuild_error})"
             return "error", message
+
+    def _non_finite_parameters(self, params: np.ndarray, sigma: float) -> str:
+        bad = params.size - np.count_nonzero(np.isfinite(params))
+        if self.rows is not None:
+            source = "as the strategy sampled them"
+        else:
+            largest = float(np.max(self.scale)) if self.scale is not None else sigma
+            source = f"theta + sigma * noise with sigma {largest:g} leaves float32's range"
+        return f"{bad} of {params.size} values are NaN or infinite ({source})"
 
     def close(self) -> None:
         self.problem.close()

@@ -38,7 +38,7 @@ from cli import Parser, UserError  # noqa: E402
 from cli.config import declared  # noqa: E402
 from cli.flags import defaults, given, positive_int, seed_value  # noqa: E402
 from cli.hints import TRAIN_SCRIPTS  # noqa: E402
-from cli.train import config_from_args  # noqa: E402
+from cli.train import check_writable, config_from_args  # noqa: E402
 from es import files  # noqa: E402
 from experiments.paper import latest_run  # noqa: E402
 
@@ -97,6 +97,7 @@ def check_flags(script: str, parser, flags: list[str]) -> argparse.Namespace:
     if "folder" not in given_names(values):
         raise UserError(f"give {script} a --folder for the launch (its seeds go to <folder>/seed<k>)")
     config_from_args(values.kind, values)  # every value checked as the script will, before any run starts
+    check_writable(values.folder)
     return values
 
 
@@ -217,6 +218,8 @@ def launch(args: argparse.Namespace, training: list[str]) -> int:
     folder = Path(check_flags(script, parser, flags).folder)
     check_record(folder, script, parser, flags)
     seeds = list(range(args.first_seed, args.first_seed + args.seeds))
+    for seed in seeds:  # a file where a seed's folder goes
+        check_writable(str(folder / f"seed{seed}"))
     parallel = min(args.jobs or cores(), len(seeds))
     threads = max(1, cores() // parallel)
     jobs = {seed: (seed_command(script, flags, seed, folder / f"seed{seed}", threads),

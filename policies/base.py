@@ -68,7 +68,7 @@ class Policy(Protocol):
         """The parameter vector from arrays as ``export`` gives them (or the original code wrote them)."""
         raise NotImplementedError
 
-    def file_name(self, role: str, env: str, reward: int, population: int, generation: int) -> str:
+    def file_name(self, role: str, env: str, reward: int | str, population: int, generation: int) -> str:
         """The original code's name for the file of ``role`` saved after ``generation`` (0-based)."""
         raise NotImplementedError
 
@@ -129,7 +129,7 @@ class FrontEnd(Policy):
     def load(self, arrays: dict[str, np.ndarray]) -> np.ndarray:
         return self.inner.load(arrays)
 
-    def file_name(self, role: str, env: str, reward: int, population: int, generation: int) -> str:
+    def file_name(self, role: str, env: str, reward: int | str, population: int, generation: int) -> str:
         return self.inner.file_name(role, env, reward, population, generation)
 
     def layer_weights(self, state: Any) -> list[np.ndarray] | None:

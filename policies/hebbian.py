@@ -154,7 +154,7 @@ class HebbianPolicy(Policy):
                                            f"{role.replace('_', ' ')} of this network"))
         return np.concatenate(blocks)
 
-    def file_name(self, role: str, env: str, reward: int, population: int, generation: int) -> str:
+    def file_name(self, role: str, env: str, reward: int | str, population: int, generation: int) -> str:
         """The original Hebbian code's name (upstream spec §6)."""
         return (f"HEBcoeffs__{env}__rew_{reward}__{self.rule.name}__init_{self.init_weights}__pop_{population}"
                 f"__{role}__{generation}.dat")

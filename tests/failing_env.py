@@ -9,6 +9,7 @@ where it does what ``FAILING_ENV_HOW`` says:
     segfault  dereference a NULL pointer through ctypes    (only in a worker process)
     nan       return a NaN reward when the action is 1 (so only some members get NaN)
     hang      sleep HANG_SECONDS, as a stuck simulator would (for the Ctrl-C tests)
+    nan_obs   return NaN observations from step k on (k = 0: from the reset on)
 
 If ``FAILING_ENV_ONCE`` names a file, the failure happens only while that file does not exist, and
 the first failure creates it: exactly one episode fails in the whole run, in whichever process, so
@@ -29,7 +30,7 @@ import numpy as np
 from gymnasium import spaces
 
 EPISODE_STEPS = 20
-HOW = ("raise", "exit", "segfault", "nan", "hang")
+HOW = ("raise", "exit", "segfault", "nan", "hang", "nan_obs")
 HANG_SECONDS = 600
 
 
@@ -66,6 +67,8 @@ class FailingEnv(gym.Env):
         return self._observation(), reward, False, self._t >= EPISODE_STEPS, {}
 
     def _observation(self) -> np.ndarray:
+        if self.how == "nan_obs" and self._t >= self.fail_step >= 0:
+            return np.full(4, np.nan, dtype=np.float32)
         angles = self._phase + 0.3 * self._t * np.arange(1, 5)
         return np.sin(angles).astype(np.float32)
 

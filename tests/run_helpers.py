@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import queue
 import shlex
@@ -125,13 +126,23 @@ def comparable_metrics(run_dir: Path) -> list[dict]:
 
 
 def assert_same_checkpoint_and_metrics(first: Path, second: Path) -> None:
-    """The checkpoints bit for bit but for wall clock, and the same metrics but for wall clock."""
+    """The checkpoints bit for bit but for wall clock and where the runs were made (the record of their
+    settings holds --folder), and the same metrics but for wall clock."""
     with np.load(first / "checkpoint.npz") as one, np.load(second / "checkpoint.npz") as other:
         assert sorted(one.files) == sorted(other.files)
         for key in one.files:
-            if key != "total_seconds":
+            if key == "settings":
+                assert recorded_settings(one[key]) == recorded_settings(other[key])
+            elif key not in ("total_seconds", "settings_digest"):
                 assert one[key].tobytes() == other[key].tobytes(), key
     assert comparable_metrics(first) == comparable_metrics(second)
+
+
+def recorded_settings(record: np.ndarray) -> dict:
+    """A checkpoint's record of the settings it was written under, but the folder the run was made in."""
+    settings = json.loads(str(record))
+    settings.pop("folder")
+    return settings
 
 
 def assert_same_run(first: Path, second: Path) -> None:

@@ -3,13 +3,16 @@ checkpoints and journals, outputs aimed at a run's files, and faults (issue 20).
 
 Each case copies one small real run folder (CartPole-v1, popsize 4, 2 generations, observation
 normalisation and Adam, so that every kind of array is in its checkpoint), damages it or aims a command
-at it, runs the script, and asserts: exit code 2; one line on stderr, no traceback; every file under
-the case's folder byte-identical before and after, and no file or folder added or removed; no marker
-file from a payload. The journal cases need the ER-MRL extra and skip without it.
+at it, runs the script, and asserts: exit code 2; one line on stderr, no traceback; a resume command
+printed only where resuming can help; every file under the case's folder byte-identical before and
+after (but those a case names as rewritten by design), and no file or folder added or removed (but
+in the folder where a case starts a new run); no marker file from a payload. The journal cases need
+the ER-MRL extra and skip without it; the full disk needs a small filesystem mounted (root).
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib.util
 import json
@@ -18,6 +21,7 @@ import pickle
 import shutil
 import subprocess
 import sys
+import tempfile
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -87,9 +91,43 @@ def drop_metrics_row(run: Path) -> None:
     (run / "metrics.csv").write_text("".join(lines[:1] + lines[2:]))
 
 
+def cut_metrics(run: Path) -> None:
+    """metrics.csv cut in the middle of its last row (the checkpoint's generation), as a copy cut short leaves it."""
+    text = (run / "metrics.csv").read_bytes()
+    last_row = text.rstrip(b"\r\n").rfind(b"\n") + 1
+    (run / "metrics.csv").write_bytes(text[:last_row + (len(text) - last_row) // 2])
+
+
+def metrics_as_pipe(run: Path) -> None:
+    (run / "metrics.csv").unlink()
+    os.mkfifo(run / "metrics.csv")
+
+
+def copy_config_of_seed(seed: int) -> Callable[[Path, Path], None]:
+    """config.json as another seed's run of the same command wrote it."""
+    return lambda run, work: edit_config(run, "run", "seed", seed)
+
+
+def damage_settings_record(run: Path) -> None:
+    edit_checkpoint(run, settings=lambda record: np.array(str(record).replace('"popsize":4', '"popsize":8')))
+
+
+def raising_module(run: Path, work: Path) -> None:
+    (work / "raising_module.py").write_text('raise RuntimeError("raising_module: broken on purpose")\n')
+
+
+def hidden_reservoirpy(run: Path, work: Path) -> None:
+    """A reservoirpy first on the path that cannot be imported, as where the extra is not installed."""
+    (work / "hidden" / "reservoirpy").mkdir(parents=True)
+    (work / "hidden" / "reservoirpy" / "__init__.py").write_text('raise ImportError("reservoirpy is hidden")\n')
+
+
 @dataclass
 class HeldLock:
     descriptor: int
+
+    def release(self) -> None:
+        os.close(self.descriptor)
 
 
 def hold_lock(run: Path) -> HeldLock:
@@ -99,6 +137,50 @@ def hold_lock(run: Path) -> HeldLock:
     descriptor = os.open(run / ".lock", os.O_RDWR | os.O_CREAT)
     fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
     return HeldLock(descriptor)
+
+
+@dataclass
+class SmallDisk:
+    """A tmpfs mounted at ``path``, unmounted when the case is done."""
+
+    path: Path
+
+    def release(self) -> None:
+        subprocess.run(["umount", str(self.path)], check=False)
+
+
+@functools.cache
+def can_mount() -> bool:
+    """Whether this process may mount a small filesystem (root, with the capability to)."""
+    if os.geteuid() != 0 or shutil.which("mount") is None:
+        return False
+    with tempfile.TemporaryDirectory() as folder:
+        mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", folder], check=False,
+                                 capture_output=True).returncode == 0
+        if mounted:
+            subprocess.run(["umount", folder], check=True)
+    return mounted
+
+
+DISK_LEFT = 8192  # bytes left free: config.json and metrics.csv fit, a weight file (35 KB) does not
+
+
+def full_disk(run: Path, work: Path) -> SmallDisk:
+    """The run on a small filesystem of its own, filled but for DISK_LEFT bytes; its lock file made already,
+    as the resume would make it."""
+    disk = work / "disk"
+    disk.mkdir()
+    subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(disk)], check=True)
+    shutil.copytree(run, disk / run.name)
+    shutil.rmtree(run)
+    (disk / run.name / ".lock").touch()
+    stats = os.statvfs(disk)
+    (disk / "filler").write_bytes(bytes(stats.f_bavail * stats.f_frsize - DISK_LEFT))
+    return SmallDisk(disk)
+
+
+def on_disk(run: Path, work: Path) -> Path:
+    return work / "disk" / run.name
 
 
 # --- journals (the ER-MRL extra) ------------------------------------------------------------------
@@ -181,6 +263,10 @@ class Case:
     prepare: Callable[[Path, Path], object] = lambda run, work: None
     env: dict = field(default_factory=dict)  # changes to the environment; None removes a variable
     extra: bool = False  # needs the ER-MRL extra
+    resumable: bool = False  # the line says how to resume: resuming can help
+    rewrites: tuple[str, ...] = ()  # the names of files the command rewrites by design (a resume's config.json)
+    creates: str | None = None  # the folder under the case's where the command starts a new run
+    mounts: bool = False  # needs to mount a small filesystem
 
 
 def train(*words) -> Callable[[Path, Path], list[str]]:
@@ -194,6 +280,17 @@ def evaluate(*words) -> Callable[[Path, Path], list[str]]:
 
 def resume(run: Path, work: Path) -> list[str]:
     return ["train_static.py", "--resume", str(run), "--generations", "3"]
+
+
+def new_run(*words) -> Callable[[Path, Path], list[str]]:
+    """A new run of popsize 4 on one core, for one generation, in the case's folder ``new``."""
+    return train("--popsize", "4", "--generations", "1", "--threads", "1", "--seed", "1", *words, "--folder",
+                 lambda run, work: str(work / "new"))
+
+
+def seeds(folder: Callable[[Path, Path], Path]) -> Callable[[Path, Path], list[str]]:
+    return lambda run, work: ["experiments/seeds.py", "--seeds", "1", "--", "train_static.py", "--environment",
+                              "CartPole-v1", "--popsize", "4", "--generations", "1", "--folder", str(folder(run, work))]
 
 
 def in_run(name: str) -> Callable[[Path, Path], str]:
@@ -255,6 +352,10 @@ CASES = {
                                              prepare=lambda run, work: edit_config(run, "es", "optimizer", "sgd")),
     "obs_norm turned off in config.json": Case(resume, "does not normalise observations",
                                                prepare=lambda run, work: edit_config(run, "policy", "obs_norm", False)),
+    "another popsize in config.json": Case(resume, "config.json differs from the settings its checkpoint was written "
+                                                   "under: --popsize 8 (the run has 4)",
+                                           prepare=lambda run, work: edit_config(run, "es", "popsize", 8)),
+    "another seed's config.json": Case(resume, "--seed 2 (the run has 1)", prepare=copy_config_of_seed(2)),
     # crafted checkpoints and run files
     "NaN in theta": Case(resume, "theta holds NaN",
                          prepare=lambda run, work: edit_checkpoint(run, theta=set_first(np.nan))),
@@ -275,6 +376,14 @@ CASES = {
                                          prepare=lambda run, work: edit_checkpoint(run, optimizer__v=lambda a: a[:5])),
     "a generation missing from metrics.csv": Case(resume, "metrics.csv holds generations",
                                                   prepare=lambda run, work: drop_metrics_row(run)),
+    "a metrics.csv cut mid-row": Case(resume, "metrics.csv is damaged at line 3", prepare=lambda run, work:
+                                      cut_metrics(run)),
+    "a named pipe as metrics.csv": Case(resume, "metrics.csv is not a regular file",
+                                        prepare=lambda run, work: metrics_as_pipe(run)),
+    "a named pipe as the lock file": Case(resume, ".lock is not a regular file",
+                                          prepare=lambda run, work: os.mkfifo(run / ".lock")),
+    "a damaged record of the settings": Case(resume, "does not match its digest",
+                                             prepare=lambda run, work: damage_settings_record(run)),
     "a checkpoint that is not one": Case(resume, "not a readable checkpoint",
                                          prepare=lambda run, work: (run / "checkpoint.npz").write_bytes(
                                              b"PK\x03\x04junk")),
@@ -283,7 +392,45 @@ CASES = {
                                                      clip=np.array(np.nan), observations=np.array(10))),
     "a folder another process holds": Case(resume, "in use by another process",
                                            prepare=lambda run, work: hold_lock(run)),
+    # limits, and values that leave float32's range at run time
+    "--sigma 1e308": Case(new_run("--environment", "CartPole-v1", "--sigma", "1e308"),
+                          "--sigma must be in (0, 3.40282e+38], got 1e+308"),
+    "--fitness_l2 1e308": Case(new_run("--environment", "CartPole-v1", "--fitness_l2", "1e308"),
+                               "--fitness_l2 must be in [0, 3.40282e+38], got 1e+308"),
+    "full CMA-ES on CartPole's 8832 parameters": Case(
+        new_run("--environment", "CartPole-v1", "--strategy", "cma_es"),
+        "keeps 7 matrices of 8832 x 8832 (the covariance, its eigenvectors, one outer product per member): about "
+        "4.1 GiB, over its budget of 1.0 GiB"),
+    "a sigma whose members leave float32": Case(
+        new_run("--environment", "CartPole-v1", "--sigma", "3e38"),
+        "CartPole-v1 failed in generation 1 with non-finite parameters for member 0", creates="new"),
+    "an environment whose observations are NaN": Case(
+        new_run("--environment", "tests.failing_env:FailingEnv-v0"),
+        "FailingEnv-v0 failed in generation 1 with non-finite observations for member 0",
+        env={"FAILING_ENV_HOW": "nan_obs", "FAILING_ENV_STEP": "0"}, creates="new"),
+    "an environment whose observations turn NaN": Case(
+        new_run("--environment", "tests.failing_env:FailingEnv-v0"),
+        "FailingEnv-v0 failed in generation 1 with non-finite observations for member 0",
+        env={"FAILING_ENV_HOW": "nan_obs", "FAILING_ENV_STEP": "3"}, creates="new"),
+    "an lr whose step leaves float32": Case(new_run("--environment", "CartPole-v1", "--lr", "1e308"),
+                                            "generation 1: the update is not finite (lr 1e+308", creates="new"),
+    "a module that raises when imported": Case(
+        new_run("--environment", "raising_module:X-v0"),
+        "cannot import 'raising_module' for environment 'raising_module:X-v0': RuntimeError: raising_module: broken "
+        "on purpose", prepare=raising_module, env={"PYTHONPATH": "."}),
+    "a full disk while saving": Case(
+        lambda run, work: ["train_static.py", "--resume", str(on_disk(run, work)), "--generations", "3"],
+        "No space left on device", prepare=full_disk, resumable=True, rewrites=("config.json", "metrics.csv"),
+        mounts=True),
     # the experiment scripts
+    "seeds.py --folder a file": Case(seeds(lambda run, work: run / "config.json"), "is not a writable folder"),
+    "seeds.py --folder under a file": Case(seeds(lambda run, work: run / "config.json" / "runs"),
+                                           "is not a writable folder"),
+    "compare.py without reservoirpy": Case(
+        lambda run, work: ["experiments/reservoir_front/compare.py", "--seeds", "1", "--generations", "1", "--popsize",
+                           "4", "--episodes", "1", "--threads", "1", "--folder", str(work / "front")],
+        "the static+reservoir arm: --reservoir draws ER-MRL's reservoirs with reservoirpy, which is not installed",
+        prepare=hidden_reservoirpy, env={"PYTHONPATH": "hidden"}),
     "paper.py --dry-run with a bad value": Case(lambda run, work: ["experiments/paper.py", "ant", "static", "--dry-run",
                                                                    "--popsize", "1"], "--popsize must be at least 2"),
     "paper.py on a folder with other settings": Case(
@@ -335,7 +482,7 @@ def outcomes(run_folder, tmp_path_factory, request) -> dict[str, Outcome]:
     """The selected cases, prepared one by one, their commands run two at a time (or one per core)."""
     selected = {item.callspec.params["name"] for item in request.session.items
                 if item.module is request.module and hasattr(item, "callspec")}
-    names = [name for name in CASES if name in selected and (not CASES[name].extra or has_extra())]
+    names = [name for name in CASES if name in selected and runnable(CASES[name])]
     prepared = {name: run_case(CASES[name], run_folder, tmp_path_factory.mktemp("case")) for name in names}
     befores = {name: snapshot(work) for name, (_, _, work, _) in prepared.items()}
 
@@ -346,22 +493,34 @@ def outcomes(run_folder, tmp_path_factory, request) -> dict[str, Outcome]:
     try:
         with ThreadPoolExecutor(max(2, os.cpu_count() or 1)) as pool:
             results = dict(zip(names, pool.map(execute, names)))
-    finally:
+        yield {name: Outcome(results[name], prepared[name][2], befores[name]) for name in names}
+    finally:  # a held lock, a mounted disk: once every case has been checked
         for *_, held in prepared.values():
-            if isinstance(held, HeldLock):
-                os.close(held.descriptor)
-    return {name: Outcome(results[name], prepared[name][2], befores[name]) for name in names}
+            if hasattr(held, "release"):
+                held.release()
+
+
+def runnable(case: Case) -> bool:
+    return (not case.extra or has_extra()) and (not case.mounts or can_mount())
+
+
+def kept(files: dict[str, str], case: Case) -> dict[str, str]:
+    """What must be as it was: every path but the files the case rewrites and the new run's folder."""
+    return {path: digest for path, digest in files.items() if Path(path).name not in case.rewrites
+            and (case.creates is None or Path(path).parts[0] != case.creates)}
 
 
 @pytest.mark.parametrize("name", CASES)
 def test_bad_input_is_one_line_exit_2_and_changes_nothing(name, outcomes):
-    if CASES[name].extra and not has_extra():
-        pytest.skip(EXTRA_REASON)
+    case = CASES[name]
+    if not runnable(case):
+        pytest.skip(EXTRA_REASON if case.extra else "mounting a small filesystem needs root")
     result, work = outcomes[name].result, outcomes[name].work
     lines = result.stderr.splitlines()
     assert result.returncode == 2, (result.returncode, result.stdout[-2000:], result.stderr[-3000:])
     assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
-    assert CASES[name].expect in lines[0], lines[0]
+    assert case.expect in lines[0], lines[0]
+    assert ("resume with:" in result.stdout + result.stderr) == case.resumable, lines[0]
     assert not (work / MARKER).exists(), "the payload ran"
-    assert snapshot(work) == outcomes[name].before
+    assert kept(snapshot(work), case) == kept(outcomes[name].before, case)
     assert "Beautiful is better than ugly" not in result.stdout  # the standard library's `this` was not imported

@@ -222,9 +222,13 @@ def test_a_full_disk_stops_the_run_naming_the_file_and_keeps_earlier_files(tmp_p
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
     monkeypatch.setattr(files.os, "fsync", disk_full)  # then every write fails after writing its bytes
-    assert train("--resume", str(run_dir), "--generations", "4") == 1
-    errors = [line for line in capsys.readouterr().out.splitlines() if line.startswith("error:")]
-    assert errors == [f"error: cannot write {run_dir / 'metrics.csv'}: No space left on device"]
+    assert train("--resume", str(run_dir), "--generations", "4") == 2
+    output = capsys.readouterr()
+    assert not [line for line in output.out.splitlines() if line.startswith("error:")]
+    assert output.err.splitlines() == [
+        f"train_static.py: error: cannot write {run_dir / 'metrics.csv'}: No space left on device; {run_dir} keeps its "
+        "checkpoint of generation 2 (every write is atomic: no file is torn); make space, then resume with: "
+        f"{hint('train_static.py', '--resume', run_dir)}"]
     after = {path.name: path.read_bytes() for path in run_dir.iterdir()}
     assert after.pop("config.json") != before.pop("config.json")  # it lists the resume command
     assert after == before  # no torn or temporary file

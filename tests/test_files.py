@@ -7,7 +7,9 @@ must load under numpy 2, while a pickle that would run code must be refused with
 """
 
 import io
+import math
 import os
+import re
 import zipfile
 
 import numpy as np
@@ -24,7 +26,7 @@ from es.files import (
     save_npy,
     write_metrics,
 )
-from es.runfolder import fitness_file_name
+from es.runfolder import fitness_file_name, reward_label
 from policies import HebbianPolicy, NetworkSpec, StaticPolicy
 
 ANT = NetworkSpec((28,), 8, squash_out=True)
@@ -205,6 +207,26 @@ def test_original_file_names():
     assert (hebbian_file_name("AntBulletEnv-v0", 2000, "A", "coevolve", 100, "coevolved_initial_weights", 4)
             == "HEBcoeffs__AntBulletEnv-v0__rew_2000__A__init_coevolve__pop_100__coevolved_initial_weights__4.dat")
     assert fitness_file_name("1600000000", "AntBulletEnv-v0") == "Fitness_values_1600000000_AntBulletEnv-v0.npy"
+
+
+def test_reward_labels_are_the_originals_and_short_whatever_the_reward():
+    assert [reward_label(value) for value in (1523.9, -12.7, 0.4, 999_999_999_999_999.0)] == [1523, -12, 0,
+                                                                                              999_999_999_999_999]
+    assert [reward_label(value) for value in (1e15, -1.712e308, math.nan, -math.inf)] == ["1e+15", "-1.71e+308", 0, 0]
+    assert (static_file_name("CartPole-v1", reward_label(-1.712e308), 4, 0)
+            == "CartPole-v1__rew_-1.71e+308__pop_4__0.dat")
+
+
+def test_a_run_whose_fitness_is_huge_keeps_its_file_names_short(tmp_path):
+    """--fitness_l2 at its limit: the fitness is about -5e36, a 37-digit integer part."""
+    import train_static
+
+    assert train_static.main(["--environment", "CartPole-v1", "--popsize", "4", "--generations", "1", "--threads",
+                              "1", "--seed", "1", "--fitness_l2", "3e38", "--folder", str(tmp_path)]) == 0
+    (run_dir,) = tmp_path.iterdir()
+    (weights,) = run_dir.glob("CartPole-v1__rew_*.dat")
+    assert re.fullmatch(r"CartPole-v1__rew_-\d\.\d\de\+36__pop_4__0\.dat", weights.name), weights.name
+    assert max(len(path.name) for path in run_dir.iterdir()) < 80
 
 
 def test_fitness_file_round_trip(tmp_path):

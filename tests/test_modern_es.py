@@ -457,7 +457,7 @@ def test_tensorboard_without_the_package_says_how_to_install_it(tmp_path, monkey
     (("--optimizer", "adam", "--beta2", "-0.1"), "--beta2 must be in [0, 1), got -0.1"),
     (("--optimizer", "momentum", "--momentum", "1.5"), "--momentum must be in [0, 1), got 1.5"),
     (("--l2coeff", "-0.01"), "--l2coeff must be a number >= 0, got -0.01"),
-    (("--fitness_l2", "-1"), "--fitness_l2 must be a number >= 0, got -1.0"),
+    (("--fitness_l2", "-1"), "--fitness_l2 must be in [0, 3.40282e+38], got -1.0"),
     (("--obs_norm", "--obs_norm_prob", "0"), "--obs_norm_prob must be in (0, 1], got 0.0"),
     (("--obs_norm", "--obs_norm_prob", "1.5"), "--obs_norm_prob must be in (0, 1], got 1.5"),
     (("--obs_norm", "--obs_clip", "0"), "--obs_clip must be a number > 0, got 0.0"),

@@ -9,6 +9,7 @@ the printed "evaluate with" command is then pasted in yet another folder with a 
 from __future__ import annotations
 
 import os
+import re
 import shlex
 import subprocess
 import sys
@@ -17,6 +18,7 @@ from pathlib import Path
 import pytest
 
 from envs import EnvSettings
+from envs.settings import LABEL_MAX
 from tests.extras import need
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -32,6 +34,15 @@ ROOT = Path(__file__).resolve().parent.parent
 ])
 def test_the_environment_label_is_a_portable_file_name(environment, label):
     assert EnvSettings(environment=environment).label == label
+
+
+def test_a_label_of_many_ids_keeps_names_short_and_apart():
+    """Twenty ids make a label of 349 characters; a run folder's files hold it twice, in names of at most
+    255 bytes."""
+    many = [f"AntBulletEnv{index}-v0" for index in range(20)]
+    labels = {EnvSettings(environment=",".join(ids)).label for ids in (many, many[::-1], many[:-1])}
+    assert len(labels) == 3 and {len(label) for label in labels} == {LABEL_MAX}
+    assert all(label.startswith("AntBulletEnv") and re.fullmatch(r".*-[0-9a-f]{8}", label) for label in labels)
 
 
 def bare_shell() -> dict:

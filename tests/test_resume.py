@@ -5,7 +5,9 @@ from __future__ import annotations
 import os
 import random
 import re
+import shlex
 import signal
+import subprocess
 import time
 from dataclasses import replace
 
@@ -45,6 +47,52 @@ def test_resumed_run_matches_an_uninterrupted_one(tmp_path, straight_run):
     split = only_run(tmp_path)
     assert train("--resume", str(split), "--generations", "4") == 0
     assert_same_run(straight_run, split)
+
+
+@pytest.fixture(scope="module")
+def straight_every_3(tmp_path_factory):
+    """9 generations without a stop, saving every 3 (the README's HalfCheetah command saves every 10)."""
+    folder = tmp_path_factory.mktemp("straight_every_3")
+    assert train(*CARTPOLE, "--threads", "1", "--generations", "9", "--print_every", "3", "--folder", str(folder)) == 0
+    return only_run(folder)
+
+
+@pytest.mark.parametrize("first", [6, 7])  # stopped at a save of --print_every, and by the end of its --generations
+def test_a_run_saving_every_few_generations_resumes_bit_for_bit(tmp_path, straight_every_3, first):
+    assert train(*CARTPOLE, "--threads", "1", "--generations", str(first), "--print_every", "3",
+                 "--folder", str(tmp_path)) == 0
+    split = only_run(tmp_path)
+    assert train("--resume", str(split), "--generations", "9") == 0
+    assert_same_run(straight_every_3, split)
+    with np.load(split / "checkpoint.npz") as saved:  # the original's log: one value per save of every 3
+        assert len(saved["fitness_log"]) == 3
+
+
+def test_sigterm_with_print_every_resumes_through_the_printed_command(tmp_path, straight_every_3):
+    training = Training(*CARTPOLE, "--threads", "1", "--generations", "9", "--print_every", "3",
+                        "--folder", str(tmp_path / "cut"))
+    try:
+        training.wait_for("iter 4 ")  # between two saves of every 3
+        training.process.send_signal(signal.SIGTERM)
+        assert training.finish() == 130
+    finally:
+        training.kill()
+    found = re.fullmatch(r"interrupted after generation (\d+); resume with: (.+)", training.stdout[-1])
+    assert found and 4 <= int(found.group(1)) < 9, training.stdout
+    command = shlex.split(found.group(2))
+    resumed = subprocess.run(command, capture_output=True, text=True, timeout=300, check=False)
+    assert resumed.returncode == 0, resumed.stderr
+    assert_same_run(straight_every_3, only_run(tmp_path / "cut"))
+
+
+def test_a_checkpoint_written_before_settings_were_recorded_resumes(tmp_path, straight_run):
+    assert train(*CARTPOLE, "--threads", "1", "--generations", "2", "--folder", str(tmp_path)) == 0
+    run_dir = only_run(tmp_path)
+    with np.load(run_dir / "checkpoint.npz") as saved:  # as today's checkpoints are, without the record
+        arrays = {key: saved[key] for key in saved.files if key not in ("settings", "settings_digest")}
+    np.savez(run_dir / "checkpoint.npz", **arrays)
+    assert train("--resume", str(run_dir), "--generations", "4") == 0
+    assert_same_run(straight_run, run_dir)
 
 
 def test_ctrl_c_finishes_the_generation_and_the_resumed_run_matches(tmp_path):
@@ -158,6 +206,19 @@ def test_metrics_rows_after_the_checkpoint_are_dropped_on_resume(tmp_path, strai
     checkpoint_2 = (run_dir / "checkpoint.npz").read_bytes()
     assert train("--resume", str(run_dir), "--generations", "3") == 0
     (run_dir / "checkpoint.npz").write_bytes(checkpoint_2)  # as if killed before checkpoint 3 was written
+    assert train("--resume", str(run_dir), "--generations", "4") == 0
+    assert_same_run(straight_run, run_dir)
+
+
+def test_a_metrics_row_cut_after_the_checkpoint_is_dropped_on_resume(tmp_path, straight_run):
+    """A copy cut short in a row the checkpoint has not reached: that row is redone, never kept half empty."""
+    assert train(*CARTPOLE, "--threads", "1", "--generations", "2", "--folder", str(tmp_path)) == 0
+    run_dir = only_run(tmp_path)
+    checkpoint_2 = (run_dir / "checkpoint.npz").read_bytes()
+    assert train("--resume", str(run_dir), "--generations", "3") == 0
+    (run_dir / "checkpoint.npz").write_bytes(checkpoint_2)
+    text = (run_dir / "metrics.csv").read_text()
+    (run_dir / "metrics.csv").write_text(text[:text.rstrip().rfind("\n") + 12])  # row 3 cut after 11 characters
     assert train("--resume", str(run_dir), "--generations", "4") == 0
     assert_same_run(straight_run, run_dir)
 

@@ -401,6 +401,13 @@ def test_full_cma_es_refuses_a_covariance_larger_than_half_the_memory():
         check_covariance_fits(8, 10_000, memory=2**30)
 
 
+def test_full_cma_es_refuses_a_covariance_over_its_budget_on_any_machine():
+    check_covariance_fits(8, 3493, memory=2**50)  # 11 x 3493^2 x 8 bytes: just under 1 GiB
+    with pytest.raises(ValueError, match=r"keeps 11 matrices of 3494 x 3494 .* about 1\.0 GiB, over its budget of "
+                                         r"1\.0 GiB .* use --strategy sep_cma_es"):
+        check_covariance_fits(8, 3494, memory=2**50)
+
+
 # --- on the loop: 1 and 2 workers, resume ---------------------------------------------------------------
 
 

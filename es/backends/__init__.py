@@ -16,6 +16,7 @@ from es.backends.base import (
     EvaluationError,
     Evaluator,
     Generation,
+    NonFiniteEpisode,
     Progress,
     Results,
     TaskBook,
@@ -53,5 +54,6 @@ def make_evaluator(run: RunSettings, build_problem: Callable[[], object], noise:
     raise BackendUnavailable(f"unknown backend {run.backend!r}; valid backends: {', '.join(BACKENDS)}")
 
 
-__all__ = ["BACKENDS", "BackendUnavailable", "EvaluationError", "Evaluator", "Generation", "ProcessEvaluator",
-           "Progress", "Results", "SerialEvaluator", "TaskBook", "WorkerStartError", "make_evaluator"]
+__all__ = ["BACKENDS", "BackendUnavailable", "EvaluationError", "Evaluator", "Generation", "NonFiniteEpisode",
+           "ProcessEvaluator", "Progress", "Results", "SerialEvaluator", "TaskBook", "WorkerStartError",
+           "make_evaluator"]

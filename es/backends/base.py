@@ -96,6 +96,17 @@ class EvaluationError(RuntimeError):
         super().__init__(describe_failure(task, env_ids, "twice", message))
 
 
+class NonFiniteEpisode(EvaluationError):
+    """A task whose member's parameters, or an observation or output where its episode failed, were NaN or
+    infinite: the same task would meet them again, so it is not retried, and a resume cannot help. ``what``:
+    "parameters", "observations" or "output"."""
+
+    def __init__(self, task: np.void, env_ids: tuple[str, ...], generation: int, what: str, message: str):
+        RuntimeError.__init__(self, describe_failure(task, env_ids, f"in generation {generation} with non-finite "
+                                                                    f"{what}", message))
+        self.what = what
+
+
 class TaskBook:
     """Book-keeping of one generation's tasks: the waiting queue, the results, the failures."""
 
@@ -121,7 +132,9 @@ class TaskBook:
         self.waiting.extendleft(reversed(list(indices)))
 
     def record(self, index: int, kind: str, payload) -> None:
-        """A worker's outcome for task ``index``: its result, or an error (retried once)."""
+        """A worker's outcome for task ``index``: its result, an error (retried once), or NaN or infinity."""
+        if kind == "nonfinite":
+            raise NonFiniteEpisode(self.tasks[index], self.env_ids, *payload)
         if kind == "error":
             self.failed(index, payload)
             self.waiting.appendleft(index)

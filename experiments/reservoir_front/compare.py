@@ -35,11 +35,14 @@ ROOT = Path(__file__).resolve().parent.parent.parent
 sys.path.insert(0, str(ROOT))  # the project's modules, when run as a script
 
 import envs  # noqa: E402
-from cli.errors import Parser, say  # noqa: E402
+from cli.errors import USER_ERRORS, Parser, explained, say  # noqa: E402
 from cli.flags import positive_int, seed_value, threads_value  # noqa: E402
 from cli.hints import EVALUATE_FLAGS, EVALUATE_SCRIPTS, TRAIN_SCRIPTS  # noqa: E402
+from cli.train import check_tensorboard, config_from_args, training_parser  # noqa: E402
+from envs import ProblemSpec  # noqa: E402
 from es.files import atomic_write_text  # noqa: E402
 from es.runfolder import named_file  # noqa: E402
+from es.strategies import make_strategy  # noqa: E402
 from experiments.paper import latest_run, run  # noqa: E402
 
 DEFAULT_ENV = "experiments.reservoir_front.partial:CartPoleNoVelocity-v1"
@@ -87,28 +90,55 @@ def parse(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
         check_sizes(tuple(dict.fromkeys(resolved)))
     except ValueError as error:
         parser.error(f"--evaluate_on {args.evaluate_on}: {error}")
+    for arm in args.arms:
+        try:
+            check_arm(args, extra, arm)
+        except USER_ERRORS as error:
+            parser.error(f"the {arm} arm: {error}")
     return args, extra
 
 
 def check_sizes(env_ids: tuple[str, ...]) -> None:
     """The training and evaluation environments make one network (observation and action sizes): each is
     made once, as a run would, and refused here if it does not fit."""
-    from envs import ProblemSpec
     from policies import PolicySettings
 
     ProblemSpec(env_ids, PolicySettings()).build().close()
 
 
+def check_arm(args: argparse.Namespace, extra: list[str], arm: str) -> None:
+    """Before any arm trains: the arm's training flags checked as its script checks them, and its network and
+    strategy made once, so that an extra it needs and that is missing (reservoirpy for the reservoir arms,
+    cmaes for --strategy cma_es) or a flag after -- that does not fit it stops the comparison here."""
+    kind = ARMS[arm][0]
+    parser = training_parser(TRAIN_SCRIPTS[kind], "", kind, folder=str(args.folder))
+    config = config_from_args(kind, parser.parse_args(arm_flags(args, extra, arm, args.seeds[0], args.folder)))
+    check_tensorboard(config)
+    spec = ProblemSpec(config.env.env_ids, config.policy, config.env.recipe_modules, config.env.max_episode_steps)
+    with explained("cannot make the environments"):
+        problem = spec.build()
+    try:
+        with explained("cannot start the run"):
+            make_strategy(config.es, problem.policy.num_params)
+    finally:
+        problem.close()
+
+
+def arm_flags(args: argparse.Namespace, extra: list[str], arm: str, seed: int, folder: Path) -> list[str]:
+    """The flags of the arm's training run."""
+    flags = ARMS[arm][1]
+    reservoir = ["--reservoir_units", str(args.units)] if flags else []
+    return ["--environment", args.environment, "--seed", str(seed), "--generations", str(args.generations),
+            "--popsize", str(args.popsize), "--threads", str(args.threads), "--folder", str(folder),
+            *flags, *reservoir, *extra]
+
+
 def train_command(args: argparse.Namespace, extra: list[str], arm: str, seed: int, folder: Path) -> list[str]:
     """The arm's training; an unfinished run resumes (--generations the total), and the training script
     refuses any other flag that differs from the run's."""
-    kind, flags = ARMS[arm]
     previous = latest_run(folder)
-    reservoir = ["--reservoir_units", str(args.units)] if flags else []
-    return [sys.executable, str(ROOT / TRAIN_SCRIPTS[kind]), *(["--resume", str(previous)] if previous else []),
-            "--environment", args.environment, "--seed", str(seed), "--generations", str(args.generations),
-            "--popsize", str(args.popsize), "--threads", str(args.threads), "--folder", str(folder),
-            *flags, *reservoir, *extra]
+    return [sys.executable, str(ROOT / TRAIN_SCRIPTS[ARMS[arm][0]]), *(["--resume", str(previous)] if previous else []),
+            *arm_flags(args, extra, arm, seed, folder)]
 
 
 def evaluate_command(args: argparse.Namespace, arm: str, run_dir: Path) -> list[str]:
