@@ -1,20 +1,25 @@
 """Files of a run: atomic writes, the original ``.dat`` format and names, safe loading.
 
-A ``.dat`` file is what the original wrote: a float32 numpy array saved with ``torch.save``.
-Loading uses ``torch.load(weights_only=True)`` with only the numpy names such an array needs
-allow-listed (under both their numpy 1 and numpy 2 module paths, since the original files were
-written with numpy 1), so a file that would run code when unpickled is refused.
+A ``.dat`` file is what the original wrote: a float32 numpy array saved with ``torch.save``, which is
+a zip archive holding ``<stem>/data.pkl`` (the array pickled with protocol 2) and a few small
+records. This module writes that archive itself, the same ``data.pkl`` byte for byte, so that no run
+imports torch (about 2 s and 200 MB) to save its weights; torch and the original code load it.
+
+Loading unpickles ``data.pkl`` with only the names a numpy array needs allow-listed (under both their
+numpy 1 and numpy 2 module paths, since the original files were written with numpy 1), so a file
+that would run code when unpickled is refused. A file holding a torch tensor, or in torch's legacy
+(pre-zip) format, goes to ``torch.load(weights_only=True)`` with the same allow-list.
 """
 
 from __future__ import annotations
 
+import codecs
 import csv
-import errno
 import io
 import json
 import os
+import pickle
 import re
-import shutil
 import tempfile
 import zipfile
 from pathlib import Path
@@ -63,43 +68,27 @@ def atomic_write_text(path: Path, text: str) -> None:
     atomic_write_bytes(path, text.encode())
 
 
+_DAT_RECORDS = ((".format_version", b"1"), (".storage_alignment", b"64"), ("byteorder", b"little"),
+                ("version", b"3\n"))  # what torch.save writes beside data.pkl (torch 2.13)
+_ZIP_TIME = (1980, 1, 1, 0, 0, 0)  # fixed: the same array gives the same file
+
+
+def dat_bytes(name: str, array: np.ndarray) -> bytes:
+    """The bytes of ``torch.save(array)`` to a file named ``name``, for a float32 array: a stored (not
+    compressed) zip archive whose one folder is the name's stem, as torch names it."""
+    folder = Path(name).stem
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w", zipfile.ZIP_STORED) as archive:
+        entries = (("data.pkl", pickle.dumps(np.asarray(array, dtype=np.float32), protocol=2)), *_DAT_RECORDS)
+        for entry, data in entries:
+            archive.writestr(zipfile.ZipInfo(f"{folder}/{entry}", _ZIP_TIME), data)
+    return buffer.getvalue()
+
+
 def save_dat(path: Path, array: np.ndarray) -> None:
-    """``torch.save`` of a float32 array, atomically, named inside as ``torch.save(path)`` names it.
-
-    torch's zip archive has one top-level folder, the file's stem (``<stem>/data.pkl``), where
-    saving to a buffer would name it ``archive/``; readers of the original files open
-    ``<stem>/data.pkl``. So the file is written under its own name in a temporary folder beside
-    the target, synced, then renamed over it.
-    """
-    import torch
-
+    """A float32 array as the original's ``.dat`` file (``dat_bytes``), atomically."""
     path = Path(path)
-    if path.exists() and not path.is_file():  # never rename over a folder, a device or a pipe
-        raise OSError(f"{path} exists and is not a regular file")
-    staging = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"))
-    try:
-        staged = staging / path.name
-        array = np.asarray(array, dtype=np.float32)
-        try:
-            torch.save(array, staged)
-        except RuntimeError as error:  # torch's writer reports a failed write without its errno
-            raise write_failure(staging, array.nbytes, error) from None
-        os.chmod(staged, _FILE_MODE)
-        with open(staged, "rb") as handle:
-            os.fsync(handle.fileno())
-        os.replace(staged, path)
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
-
-
-def write_failure(folder: Path, size: int, error: Exception) -> OSError:
-    """The OSError behind a library's failed write of ``size`` bytes into ``folder``: a full disk, known by
-    the space left, or the library's own words."""
-    stats = os.statvfs(folder)
-    if stats.f_bavail * stats.f_frsize < size:
-        return OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
-    words = str(error).strip().splitlines()
-    return OSError(errno.EIO, f"{type(error).__name__}: {words[0] if words else 'the write failed'}")
+    atomic_write_bytes(path, dat_bytes(path.name, array))
 
 
 def _numpy_safe_globals() -> list:
@@ -149,17 +138,67 @@ def _check_weight_file(path: Path) -> None:
                               f"{head!r}; a .dat file is a numpy array saved with torch.save)")
 
 
-def load_dat(path: str | Path) -> np.ndarray:
-    """A ``.dat`` weight file as a finite float32 array (tensors are accepted too, bfloat16 included)."""
-    import pickle
+class _NeedsTorch(Exception):
+    """The pickle holds a torch tensor: torch's own loader reads it."""
 
-    path = Path(path)
-    _check_weight_file(path)
+
+def _allowed_globals() -> dict[tuple[str, str], object]:
+    """(module, name) -> object: what a pickled numpy array may ask for (``_numpy_safe_globals``), and
+    ``_codecs.encode``, with which protocol 2 pickles the array's bytes."""
+    allowed = {("_codecs", "encode"): codecs.encode}
+    for item in _numpy_safe_globals():
+        target, name = item if isinstance(item, tuple) else (item, f"{item.__module__}.{item.__qualname__}")
+        module, _, attribute = name.rpartition(".")
+        allowed[(module, attribute)] = target
+    return allowed
+
+
+class _ArrayUnpickler(pickle.Unpickler):
+    """Unpickles what a .dat file may hold: numpy arrays and plain data; anything else is refused, named."""
+
+    allowed = _allowed_globals()
+
+    def find_class(self, module: str, name: str):
+        if (module, name) in self.allowed:
+            return self.allowed[(module, name)]
+        if module == "torch" or module.startswith("torch."):
+            raise _NeedsTorch
+        raise pickle.UnpicklingError(f"GLOBAL {module}.{name}")  # _refusal_reason names it
+
+    def persistent_load(self, pid):  # a tensor's storage
+        raise _NeedsTorch
+
+
+def _unpickled_archive(path: Path):
+    """The object of a zip-format .dat file, unpickled without torch; _NeedsTorch for a tensor."""
+    with zipfile.ZipFile(path) as archive:
+        pickles = [name for name in archive.namelist() if name.endswith("/data.pkl") and name.count("/") == 1]
+        if len(pickles) != 1:
+            raise ValueError(f"{len(pickles)} data.pkl records in the archive, not one")
+        data = archive.read(pickles[0])
+    return _ArrayUnpickler(io.BytesIO(data)).load()
+
+
+def _torch_load(path: Path):
     import torch
 
+    with torch.serialization.safe_globals(_numpy_safe_globals()):
+        loaded = torch.load(path, weights_only=True, map_location="cpu")
+    if isinstance(loaded, torch.Tensor):
+        tensor = loaded.detach().cpu()
+        loaded = (tensor.float() if tensor.is_floating_point() else tensor).numpy()  # numpy has no bfloat16
+    return loaded
+
+
+def load_dat(path: str | Path) -> np.ndarray:
+    """A ``.dat`` weight file as a finite float32 array (tensors are accepted too, bfloat16 included)."""
+    path = Path(path)
+    _check_weight_file(path)
     try:
-        with torch.serialization.safe_globals(_numpy_safe_globals()):
-            loaded = torch.load(path, weights_only=True, map_location="cpu")
+        try:
+            loaded = _unpickled_archive(path) if zipfile.is_zipfile(path) else _torch_load(path)
+        except _NeedsTorch:
+            loaded = _torch_load(path)
     except pickle.UnpicklingError as error:
         reason = _refusal_reason(error)
         raise FileFormatError(f"refused to load {str(path)!r}: not a plain weight array ({reason}); "
@@ -168,9 +207,6 @@ def load_dat(path: str | Path) -> np.ndarray:
         detail = str(error).split(". ")[0].splitlines()[0] if str(error) else ""
         raise FileFormatError(f"weight file {str(path)!r} is truncated or corrupt ({type(error).__name__}: "
                               f"{detail})") from None
-    if isinstance(loaded, torch.Tensor):
-        tensor = loaded.detach().cpu()
-        loaded = (tensor.float() if tensor.is_floating_point() else tensor).numpy()  # numpy has no bfloat16
     if not isinstance(loaded, np.ndarray) or not np.issubdtype(loaded.dtype, np.number):
         raise FileFormatError(f"{str(path)!r} holds a {type(loaded).__name__}, not a numeric array")
     array = loaded.astype(np.float32)

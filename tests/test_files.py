@@ -10,7 +10,10 @@ import io
 import math
 import os
 import re
+import subprocess
+import sys
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,6 +22,7 @@ import torch
 from es.files import (
     METRICS_COLUMNS,
     FileFormatError,
+    _numpy_safe_globals,
     atomic_write_bytes,
     load_dat,
     read_metrics,
@@ -28,6 +32,8 @@ from es.files import (
 )
 from es.runfolder import fitness_file_name, reward_label
 from policies import HebbianPolicy, NetworkSpec, StaticPolicy
+
+ROOT = Path(__file__).resolve().parent.parent
 
 ANT = NetworkSpec((28,), 8, squash_out=True)
 
@@ -53,6 +59,29 @@ def test_save_and_load_dat_round_trip(tmp_path, shape):
     np.testing.assert_array_equal(loaded, array)
     # what the original's evaluate scripts did must still work on our files
     np.testing.assert_array_equal(torch.load(path, weights_only=False), array)
+
+
+def test_save_dat_writes_torch_saves_archive_without_torch(tmp_path):
+    """The same records as torch.save (but its random serialization id), data.pkl byte for byte; torch's safe
+    loader reads it; the same array gives the same file; and a training run never imports torch."""
+    array = np.random.default_rng(1).standard_normal(300).astype(np.float32)
+    save_dat(tmp_path / "ours.dat", array)
+    torch.save(array, tmp_path / "theirs.dat")
+    with zipfile.ZipFile(tmp_path / "ours.dat") as ours, zipfile.ZipFile(tmp_path / "theirs.dat") as theirs:
+        mine = {name.split("/", 1)[1]: ours.read(name) for name in ours.namelist()}
+        torchs = {name.split("/", 1)[1]: theirs.read(name) for name in theirs.namelist()}
+        assert {name.split("/", 1)[0] for name in ours.namelist()} == {"ours"}
+    assert mine == {name: data for name, data in torchs.items() if name != ".data/serialization_id"}
+    with torch.serialization.safe_globals(_numpy_safe_globals()):
+        np.testing.assert_array_equal(torch.load(tmp_path / "ours.dat", weights_only=True), array)
+    (tmp_path / "again").mkdir()
+    save_dat(tmp_path / "again" / "ours.dat", array)
+    assert (tmp_path / "again" / "ours.dat").read_bytes() == (tmp_path / "ours.dat").read_bytes()
+    code = ("import sys, train_static; train_static.main(['--environment', 'CartPole-v1', '--popsize', '4', "
+            f"'--generations', '1', '--threads', '2', '--folder', {str(tmp_path / 'runs')!r}]); "
+            "print('torch' in sys.modules)")
+    result = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0 and result.stdout.strip().splitlines()[-1] == "False", result.stderr[-2000:]
 
 
 def test_save_dat_stores_float32(tmp_path):
