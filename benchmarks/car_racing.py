@@ -35,6 +35,9 @@ on both alike; the medians over rounds are printed.
   rewards, flags and info compared at every step and ``rgb_array`` frames every ``--frame_every``
   steps; exit code 1 on the first difference.
 
+Each run writes its record to benchmarks/results/ (benchmarks/record.py): every ratio and rate below
+with its rounds, the projections computed round by round.
+
 Targets (issue 21): env.step >= 8x the stock class (goal 15x), reset >= 2.5x (goal 4x), the Hebbian
 training loop per step >= 5x (goal 8x).
 """
@@ -55,6 +58,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import gymnasium as gym
 from gymnasium.envs.box2d.car_racing import FPS
+from record import Record, add_results_flag
 from throughput import generation_tasks
 
 import envs
@@ -416,19 +420,29 @@ def paper_run_memory(workers: int, popsize: int) -> tuple[int, int, int]:
     return peak_pss, peak_uss, most
 
 
-def projection(step: tuple[float, float], label: str, length: int) -> None:
-    """The paper's Hebbian run's hours on 2 and 16 workers from (stock, fast) CPU seconds per step of the
-    loop capped at ``length`` steps."""
+def projection(record: Record, key: str, step_rates: tuple[list[float], list[float]], label: str,
+               length: int) -> None:
+    """The paper's Hebbian run's hours on 2 and 16 workers from (stock, fast) steps per CPU second of the
+    loop capped at ``length`` steps, round by round."""
     for workers in (2, 16):
-        hours = [(PAPER_POPSIZE + 1) * FULL_EPISODE * seconds / workers * PAPER_GENERATIONS / 3600 for seconds in step]
+        hours = [[(PAPER_POPSIZE + 1) * FULL_EPISODE / rate / workers * PAPER_GENERATIONS / 3600 for rate in rates]
+                 for rates in step_rates]
+        for name, values in zip(("stock", "fast"), hours):
+            record.add(f"{key}_{name}_{workers}_workers", f"the paper's Hebbian run (popsize {PAPER_POPSIZE}, "
+                       f"{PAPER_GENERATIONS} generations, {FULL_EPISODE}-step episodes) on {workers} workers, the "
+                       f"{name} class{label if name == 'fast' else ''}, projected from the loop capped at {length} "
+                       "steps", "h", values)
         print(f"projection, the paper's Hebbian run (popsize {PAPER_POPSIZE}, {PAPER_GENERATIONS} generations, "
               f"{FULL_EPISODE}-step episodes) on {workers} workers, from the loop capped at {length} steps: "
-              f"stock {hours[0]:.1f} h, fast{label} {hours[1]:.1f} h")
+              f"stock {statistics.median(hours[0]):.1f} h, fast{label} {statistics.median(hours[1]):.1f} h")
 
 
-def summary(label: str, stock: list[float], fast: list[float], target: float | None = None,
+def summary(record: Record, key: str, label: str, stock: list[float], fast: list[float], target: float | None = None,
             unit: str = "steps") -> None:
     ratios = [f / s for s, f in zip(stock, fast)]
+    record.add(key, f"{label}: the fast class / Gymnasium's, {unit} per CPU second", "x", ratios)
+    record.add(f"{key}_stock", f"{label}: Gymnasium's class, {unit} per CPU second", f"{unit}/s", stock)
+    record.add(f"{key}_fast", f"{label}: the fast class, {unit} per CPU second", f"{unit}/s", fast)
     goal = f" (target >= {target}x)" if target else ""
     print(f"{label}: stock {statistics.median(stock):,.1f}, fast {statistics.median(fast):,.1f} {unit} per CPU "
           f"second; ratio {statistics.median(ratios):.2f}x{goal} (rounds: {', '.join(f'{r:.2f}' for r in ratios)})")
@@ -454,32 +468,39 @@ def main() -> int:
                         help="with --identity: how many episodes")
     parser.add_argument("--frame_every", type=positive_int, default=50,
                         help="with --identity: compare render() this often")
+    add_results_flag(parser)
     args = parser.parse_args()
-    summary("environment (env.step)", *env_rates(args.rounds, args.steps), ENV_TARGET)
-    summary("environment (env.reset)", *reset_rates(args.rounds, args.resets), RESET_TARGET, unit="resets")
+    record = Record("car_racing")
+    summary(record, "env_step", "environment (env.step)", *env_rates(args.rounds, args.steps), ENV_TARGET)
+    summary(record, "env_reset", "environment (env.reset)", *reset_rates(args.rounds, args.resets), RESET_TARGET,
+            unit="resets")
     phases = [f"{first}-{end - 1}: {stock * 1e3:.2f} / {fast * 1e3:.2f} ms, {stock / fast:.1f}x"
               for (first, end), (stock, fast) in zip(PHASES, phase_costs(args.phase_episodes))]
     print(f"environment (env.step) by step of the episode, stock / fast CPU per step (the camera zooms in "
           f"over steps 0-{ZOOM_IN - 1}): {'; '.join(phases)}")
+    record.note("env_step_by_phase", phases)
     for kind in ("static", "hebbian"):
         stock, fast, length = loop_rates(kind, args.rounds, args.popsize)
-        summary(f"training loop, generation 0, {kind} (mean episode {length:.0f} steps)", stock, fast)
-    hebbian_step, capped = None, f"training loop, episodes capped at {args.length} steps"
+        summary(record, f"loop_generation_0_{kind}", f"training loop, generation 0, {kind} (mean episode "
+                f"{length:.0f} steps)", stock, fast)
+    capped = f"training loop, episodes capped at {args.length} steps"
     for kind in ("static", "hebbian"):
         stock, fast, mean_steps = capped_loop_rates(kind, args.rounds, args.episodes, args.length)
-        summary(f"{capped} ({mean_steps:.0f} on average), {kind}", stock, fast,
+        summary(record, f"capped_loop_{kind}", f"{capped} ({mean_steps:.0f} on average), {kind}", stock, fast,
                 LOOP_TARGET if kind == "hebbian" else None)
         if kind == "hebbian":
-            hebbian_step = (1 / statistics.median(stock), 1 / statistics.median(fast))
-    projection(hebbian_step, "", args.length)
+            projection(record, "projection", (stock, fast), "", args.length)
     if args.fast_conv:
         stock, fast, mean_steps = capped_loop_rates("hebbian", args.rounds, args.episodes, args.length, fast_conv=True)
-        summary(f"{capped} ({mean_steps:.0f} on average), hebbian, the fast class with --fast_conv against the "
-                "stock class with the default CNN", stock, fast, LOOP_TARGET)
-        projection((1 / statistics.median(stock), 1 / statistics.median(fast)), " with --fast_conv", args.length)
+        summary(record, "capped_loop_hebbian_fast_conv", f"{capped} ({mean_steps:.0f} on average), hebbian, the fast "
+                "class with --fast_conv against the stock class with the default CNN", stock, fast, LOOP_TARGET)
+        projection(record, "projection_fast_conv", (stock, fast), " with --fast_conv", args.length)
     for kind in ("static", "hebbian"):
         parts = policy_share(kind, args.share_steps)
         total = sum(parts.values())
+        for part, seconds in parts.items():
+            record.add(f"share_{kind}_{part.replace('.', '_')}", f"pixel policy, {kind}: {part}, CPU per step of "
+                       f"the fast class over {args.share_steps} steps", "ms", [1e3 * seconds])
         print(f"pixel policy, {kind}: {1e3 * total:.2f} ms CPU per step of the fast class: "
               + ", ".join(f"{part} {1e3 * seconds:.2f} ms ({seconds / total:.0%})" for part, seconds in parts.items())
               + f"; the policy (resize + network) is {(parts['resize'] + parts['network']) / total:.0%} of a step")
@@ -488,14 +509,24 @@ def main() -> int:
     print(f"peak memory of this process: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB (RSS)")
     if args.memory:
         pss, uss, processes = paper_run_memory(2, PAPER_POPSIZE)
+        for name, value in (("pss", pss), ("uss", uss)):
+            record.add(f"memory_{name}", f"train_hebb.py CarRacing-v0 ABCD_lr, popsize {PAPER_POPSIZE}, 2 workers, "
+                       f"one generation: peak {name.upper()} summed over its {processes} processes", "MiB",
+                       [value / 2**20])
         print(f"memory, train_hebb.py CarRacing-v0 ABCD_lr, popsize {PAPER_POPSIZE}, 2 workers, one generation: "
               f"peak PSS {pss / 2**20:.0f} MiB, peak USS {uss / 2**20:.0f} MiB over {processes} processes "
               f"(target < 1 GB)")
     if args.identity:
         print(f"identity: {args.episodes_compared} episodes of up to 1000 steps, frames every {args.frame_every} steps")
-        if not identity(args.episodes_compared, args.frame_every):
+        same = identity(args.episodes_compared, args.frame_every)
+        record.note("identity", {"episodes": args.episodes_compared, "frame_every": args.frame_every,
+                                 "identical": same})
+        record.write(args.results)
+        if not same:
             return 1
         print("identity: every observation, reward, flag, info and compared frame identical")
+        return 0
+    record.write(args.results)
     return 0
 
 

@@ -14,6 +14,9 @@ the project's tanh) and ``--fast_conv``'s compiled pass, in one run.
 - outputs: the static and the Hebbian networks' outputs on those frames, in order, with and without it;
 - returns: one static and one Hebbian parameter vector (generation-0 draws, fixed seeds) evaluated
   with and without the flag on the same ``--episodes`` seeds, episodes capped at ``--steps``.
+
+Each run writes its record to benchmarks/results/ (benchmarks/record.py): the times per frame and their
+ratios round by round, the differences as notes.
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 from numba import njit
+from record import Record, add_results_flag
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
@@ -93,7 +97,7 @@ def per_frame(features, frames: list[np.ndarray]) -> float:
     return (time.process_time() - start) / len(frames)
 
 
-def speed(frames: list[np.ndarray], rounds: int) -> None:
+def speed(record: Record, frames: list[np.ndarray], rounds: int) -> None:
     weights = conv_weights("default", 1)
     paths = {"torch": TorchCNN(weights), "default": ConvFeatures(weights, SHAPES),
              "fast": ConvFeatures(weights, SHAPES, fast=True)}
@@ -107,18 +111,27 @@ def speed(frames: list[np.ndarray], rounds: int) -> None:
         for name, features in paths.items():
             times[name].append(per_frame(features, frames))
     torch_us, default_us, fast_us = (statistics.median(times[name]) * 1e6 for name in paths)
+    for name in paths:
+        record.add(f"{name}_per_frame", f"the CNN's {name} path, CPU time per CarRacing frame", "us",
+                   [seconds * 1e6 for seconds in times[name]])
+    for name in ("default", "fast"):
+        record.add(f"{name}_against_torch", f"the CNN's {name} path against torch's, per frame", "x",
+                   [torch / other for torch, other in zip(times["torch"], times[name])])
+    record.note("default_same_bits_twice", same)
     print(f"per frame ({len(frames)} CarRacing frames, median of {rounds} rounds): torch {torch_us:.0f} us; "
           f"the default ({paths['default'].path}) {default_us:.0f} us, {torch_us / default_us:.2f}x, the same bits "
           f"twice on every frame: {same}; --fast_conv {fast_us:.0f} us, {torch_us / fast_us:.2f}x")
 
 
-def differences(frames: list[np.ndarray]) -> None:
+def differences(record: Record, frames: list[np.ndarray]) -> None:
     for kind in ("default", "normal"):
         weights = conv_weights(kind, 2)
         paths = TorchCNN(weights), ConvFeatures(weights, SHAPES), ConvFeatures(weights, SHAPES, fast=True)
         torch_path, default, fast = paths
         largest = max(float(np.abs(torch_path(frame) - default(frame)).max()) for frame in frames)
         fast_largest = max(float(np.abs(default(frame) - fast(frame)).max()) for frame in frames)
+        record.note(f"features_{kind}_weights", {"largest_torch_minus_default": largest,
+                                                 "largest_default_minus_fast": fast_largest})
         print(f"features, {kind} weights, over {len(frames)} frames: largest |torch - default| {largest:.2e}, "
               f"|default - fast| {fast_largest:.2e}")
 
@@ -192,16 +205,21 @@ def main() -> None:
     parser.add_argument("--steps", type=positive_int, default=300, help="the episodes' cap")
     parser.add_argument("--tanh_every", type=positive_int, default=64,
                         help="1: every float32 of [0, 8] for the rational tanh (about a minute)")
+    add_results_flag(parser)
     args = parser.parse_args()
+    record = Record("fast_conv")
     frames = observations(args.frames)
-    speed(frames, args.rounds)
-    differences(frames)
+    speed(record, frames, args.rounds)
+    differences(record, frames)
     largest, at, ulps, at_ulp, decreases = tanh_error(args.tanh_every)
+    record.note("rational_tanh", {"every": args.tanh_every, "largest_error": largest, "at": float(at),
+                                  "largest_ulps": ulps, "at_ulps": float(at_ulp), "decreasing_steps": decreases})
     checked = "every float32" if args.tanh_every == 1 else f"every {args.tanh_every}th float32"
     print(f"tanh on {checked} of [0, 8]: largest error {largest:.2e} (at x = {at:.6g}), {ulps:.1f} ulp "
           f"(at x = {at_ulp:.6g}); decreasing steps: {decreases}")
     actions(frames)
     returns(args.episodes, args.steps)
+    record.write(args.results)
 
 
 if __name__ == "__main__":

@@ -13,7 +13,8 @@ both backends return the same numbers. Target (issue 6): Ray no more than 10 % s
 ratio of median generation times ray / process <= 1.10.
 
 Ray's own services (raylet, GCS) stay up during the process pool's rounds too; on this 2-core
-machine they cost both backends alike.
+machine they cost both backends alike. Each run writes its record to benchmarks/results/
+(benchmarks/record.py).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from record import Record, add_results_flag
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
@@ -87,7 +89,9 @@ def main() -> int:
     parser.add_argument("--rounds", type=int, default=5, help="measured generations per backend")
     parser.add_argument("--sigma", type=float, default=0.1)
     parser.add_argument("--seed", type=int, default=0)
+    add_results_flag(parser)
     args = parser.parse_args()
+    record = Record(f"ray_vs_process-{args.environment}", ("ray",))
     env_id = envs.resolve_env_id(args.environment)
     spec = ProblemSpec((env_id,))
     problem = spec.build()
@@ -109,9 +113,16 @@ def main() -> int:
         noise.close()
     process, ray = statistics.median(seconds["process"]), statistics.median(seconds["ray"])
     ratio = ray / process
+    label = f"{env_id}, popsize {args.popsize}, {args.workers} workers"
+    for name in ("process", "ray"):
+        record.add(f"{name}_seconds", f"{label}: wall seconds per generation, {name}", "s", seconds[name])
+    record.add("ratio", f"{label}: generation time, Ray / the process pool", "x",
+               [r / p for r, p in zip(seconds["ray"], seconds["process"])])
+    record.note("start_up_seconds", {"process": process_start, "ray": ray_start})
     print(f"median generation: process {process:.2f} s, ray {ray:.2f} s | ratio ray / process {ratio:.3f} "
           f"(of the sums {sum(seconds['ray']) / sum(seconds['process']):.3f}) | target <= {TARGET:.2f}: "
           f"{'met' if ratio <= TARGET else 'NOT met'}")
+    record.write(args.results)
     return 0
 
 

@@ -17,7 +17,8 @@ drift (about +-40 % here) and other load cancel out; the median over rounds is p
 Resets are outside the raw side: on CarRacing, whose reset generates a track (about 10-20 ms) and
 whose generation-0 episodes stop after some 25 steps, that alone keeps the ratio well below the
 others' (``benchmarks/car_racing.py`` compares the loop with Gymnasium's class instead).
---scaling compares generations with 1 and 2 worker processes, in wall time. Targets (issues 2, 3):
+--scaling compares generations with 1 and 2 worker processes in wall time, alternating round by round.
+Each run writes its record to benchmarks/results/ (benchmarks/record.py). Targets (issues 2, 3):
 static MLP on HalfCheetah-v5 >= 0.85, Hebbian ABCD_lr >= 0.70 on HalfCheetah-v5 and >= 0.90 on
 AntBulletEnv-v0 (--threads 1); 1 -> 2 workers on AntBulletEnv-v0 >= 1.8x (--scaling).
 
@@ -42,6 +43,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import gymnasium as gym
+from record import Record, add_results_flag
 
 import envs
 from envs import ProblemSpec, make_env, quiet_output
@@ -119,11 +121,13 @@ def build(spec: ProblemSpec, workers: int, noise: NoiseTable, dim: int):
     return ProcessEvaluator(spec.build, noise, dim, spec.env_ids, workers)
 
 
-def setup(args, spec: ProblemSpec, workers: int):
+def setup(args, spec: ProblemSpec, workers: int, shared: bool = False):
+    """An evaluator with ``workers`` workers, its noise table (in shared memory if ``shared``, for another
+    evaluator's workers too), theta and one generation of tasks, warmed up."""
     problem = spec.build()
     theta = problem.policy.initial_params(np.random.default_rng(0))
     problem.close()
-    noise = NoiseTable.create(0, max(1 << 20, 4 * theta.size), shared=workers > 1)
+    noise = NoiseTable.create(0, max(1 << 20, 4 * theta.size), shared=shared or workers > 1)
     evaluator = build(spec, workers, noise, theta.size)
     tasks = generation_tasks(args.popsize, theta.size, noise, np.random.default_rng(1))
     training_rate(evaluator, theta, args.sigma, tasks)  # warm-up: compilation, first resets
@@ -164,14 +168,24 @@ def measure_ratio(args, spec: ProblemSpec, preprocessed: bool) -> tuple[list[tup
     return rates, act_seconds, steps
 
 
-def measure_rate(args, spec: ProblemSpec, workers: int) -> list[float]:
-    """Training env steps per second per worker, one value per round (wall time)."""
-    evaluator, noise, theta, tasks = setup(args, spec, workers)
+def measure_scaling(args, spec: ProblemSpec) -> tuple[list[float], list[float]]:
+    """Training env steps per second in all, with 1 and with 2 workers, one value each per round (wall
+    time), the two alternating round by round (which goes first too) so that the machine's drift falls on
+    both."""
+    one, noise, theta, tasks = setup(args, spec, 1, shared=True)
+    two = build(spec, 2, noise, theta.size)
+    training_rate(two, theta, args.sigma, tasks)  # warm-up: the workers' compilation, first resets
+    rates: dict[int, list[float]] = {1: [], 2: []}
     try:
-        return [training_rate(evaluator, theta, args.sigma, tasks) for _ in range(args.rounds)]
+        for index in range(args.rounds):
+            pair = ((1, one), (2, two)) if index % 2 == 0 else ((2, two), (1, one))
+            for workers, evaluator in pair:
+                rates[workers].append(workers * training_rate(evaluator, theta, args.sigma, tasks))
     finally:
-        evaluator.close()
+        one.close()
+        two.close()
         noise.close()
+    return rates[1], rates[2]
 
 
 def main() -> int:
@@ -185,28 +199,43 @@ def main() -> int:
     parser.add_argument("--popsize", type=int, default=8, help="episodes per measured generation")
     parser.add_argument("--sigma", type=float, default=0.1)
     parser.add_argument("--rounds", type=int, default=5)
+    add_results_flag(parser)
     args = parser.parse_args()
     env_id = envs.resolve_env_id(args.environment)
     spec = ProblemSpec((env_id,), PolicySettings(args.policy, args.hebb_rule, args.init_weights, network=args.network))
     label = f"{env_id}, {args.policy}" + (f" {args.hebb_rule}" if args.policy == "hebbian" else "")
     label += f" --network {args.network}" if args.network != "default" else ""
+    name = f"throughput-{env_id}-{args.policy}" + ("-" + args.network if args.network != "default" else "")
+    record = Record(name + ("-scaling" if args.scaling else ""), ("ale-py",))
     if args.scaling:
-        one = statistics.median(measure_rate(args, spec, 1))
-        two = statistics.median(measure_rate(args, spec, 2))
-        print(f"{label}: 1 worker {one:,.0f} steps/s, 2 workers {2 * two:,.0f} steps/s in total")
-        print(f"speed-up 1 -> 2 workers: {2 * two / one:.2f}x")
+        one, two = measure_scaling(args, spec)
+        speedups = [b / a for a, b in zip(one, two)]
+        record.add("one_worker", f"{label}: training env steps per second, 1 worker", "steps/s", one)
+        record.add("two_workers", f"{label}: training env steps per second, 2 workers in all", "steps/s", two)
+        record.add("speedup", f"{label}: speed-up from 1 to 2 workers", "x", speedups)
+        print(f"{label}: 1 worker {statistics.median(one):,.0f} steps/s, 2 workers {statistics.median(two):,.0f} "
+              "steps/s in all")
+        print(f"speed-up 1 -> 2 workers: {statistics.median(speedups):.2f}x (rounds: "
+              + ", ".join(f"{speedup:.2f}" for speedup in speedups) + ")")
+        record.write(args.results)
         return 0
     probe = spec.build()
     preprocessed = probe.net.pixels
     probe.close()
     rates, act_seconds, steps = measure_ratio(args, spec, preprocessed)
     raw = "the environment with the same preprocessing" if preprocessed else "raw env.step"
+    ratios = [trained / raw for raw, trained in rates]
+    record.add("training_rate", f"{label}: training loop, env steps per CPU second", "steps/s",
+               [rate[1] for rate in rates])
+    record.add("raw_rate", f"{label}: {raw}, env steps per CPU second", "steps/s", [rate[0] for rate in rates])
+    record.add("ratio", f"{label}: training loop / {raw}, the same {steps} steps per round", "", ratios)
+    record.add("policy", f"{label}: the policy's CPU time per step, over one pass", "us", [act_seconds * 1e6])
     print(f"{label}, 1 worker: training loop against {raw}, the same {steps} steps per round (CPU time)")
     print(f"steps per second: training {statistics.median(rate[1] for rate in rates):,.0f}, raw "
           f"{statistics.median(rate[0] for rate in rates):,.0f}; policy {act_seconds * 1e6:.0f} µs per step")
-    ratios = [trained / raw for raw, trained in rates]
     print(f"ratio training / raw: {statistics.median(ratios):.3f} (rounds: "
           + ", ".join(f"{ratio:.2f}" for ratio in ratios) + ")")
+    record.write(args.results)
     return 0
 
 

@@ -37,7 +37,9 @@ A strategy this tool does not have (``--strategy`` of the training scripts) is r
 
 Targets (issue 22): per environment step every strategy >= 1.5x its EvoTorch counterpart; on
 CartPole-v1 this tool's PGPE and SNES need no more environment steps to solve than EvoTorch's,
-median over 5 seeds. Needs: pip install -r requirements-bench.txt
+median over 5 seeds. Each run writes its record to benchmarks/results/ (benchmarks/record.py): per
+strategy, each seed's ratio of steps per second and both tools' steps to solve. Needs: pip install -r
+requirements-bench.txt
 """
 
 from __future__ import annotations
@@ -52,6 +54,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from record import Record, add_results_flag
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
@@ -100,6 +103,7 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
                         help="pgpe: the centre's step size (default: this tool's, --clipup_max_speed / 2)")
     parser.add_argument("--target", type=float, default=None,
                         help="centre return that counts as solved (default: 475 on CartPole-v1, none elsewhere)")
+    add_results_flag(parser)
     args = parser.parse_args(argv)
     unknown = [name for name in args.strategies.split(",") if name not in COUNTERPARTS]
     if unknown:
@@ -261,7 +265,7 @@ def show(value: float) -> str:
     return "not solved" if value == float("inf") else f"{value:,.0f}"
 
 
-def compare(strategy: str, args: argparse.Namespace) -> None:
+def compare(record: Record, strategy: str, args: argparse.Namespace) -> None:
     es = our_settings(strategy, args)
     if es is None:
         print(f"\n## {strategy}: this tool has no --strategy {strategy} yet; EvoTorch not run")
@@ -286,6 +290,11 @@ def compare(strategy: str, args: argparse.Namespace) -> None:
             print(f"| {result.seed} | {result.tool} | {result.generations} | {result.steps:,} | "
                   f"{result.steps_per_second:,.0f} | {solved} | {result.final_centre:.1f} |")
     ratios = [mine.steps_per_second / other.steps_per_second for mine, other in zip(ours, theirs)]
+    record.add(f"{strategy}_steps_per_second", f"{strategy} on {args.environment}, popsize {args.popsize}: env steps "
+               "per second, this tool / EvoTorch, one value per seed", "x", ratios)
+    record.note(f"{strategy}_steps_to_solve", {"target": args.target, "seeds": [r.seed for r in ours],
+                                               "this tool": [r.solved_at for r in ours],
+                                               "EvoTorch": [r.solved_at for r in theirs]})
     print(f"steps per second, this tool / EvoTorch: median {statistics.median(ratios):.2f}x "
           f"(seeds: {min(ratios):.2f}x to {max(ratios):.2f}x; target >= 1.5x)")
     if args.target is not None:
@@ -321,9 +330,11 @@ def main(argv: list[str] | None = None) -> int:
 
     logging.getLogger("evotorch").setLevel(logging.WARNING)
     print(f"EvoTorch {evotorch.__version__}; one process per tool; network {evotorch_network()}")
+    record = Record(f"vs_evotorch-{args.environment}", ("evotorch", "cma", "cmaes"))
     resolve_defaults(args)
     for strategy in args.strategies.split(","):
-        compare(strategy, args)
+        compare(record, strategy, args)
+    record.write(args.results)
     return 0
 
 

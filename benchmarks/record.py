@@ -1,0 +1,154 @@
+"""A benchmark's record: what one run measured, on which machine, at which load (benchmarks/results/*.json).
+
+Every script of ``benchmarks/`` writes one record per run through this module, and ``docs/generate.py``
+renders the figures of the README and ``docs/`` from records, never from numbers typed into a page.
+A record holds the commit, the date, the CPU model and cores, the versions of the packages that set the
+speed, the 1-minute load average before and after the run, the command, and for each measure its value in
+every round with their median, minimum and maximum. A record taken while the load average exceeded the
+number of cores, before or after the run, is marked ``loaded``: the machine was shared, and the docs
+refuse to publish it (docs/development.md, "Benchmark discipline").
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.metadata
+import json
+import os
+import platform
+import re
+import shlex
+import statistics
+import subprocess
+import sys
+from dataclasses import asdict, dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "benchmarks" / "results"
+# what sets the speed of every benchmark: the interpreter is added, and each script names its own extras
+VERSIONS = ("numpy", "numba", "torch", "gymnasium", "box2d", "pygame-ce", "mujoco", "pybullet",
+            "opencv-python-headless")
+MIN_ROUNDS = 5  # a published figure is the median of at least this many rounds
+
+
+@dataclass
+class Measure:
+    """One measured quantity: its value in each round, in ``unit`` (``x`` for a ratio of speeds, ``""``
+    for a plain ratio, ``us``, ``ms``, ``s``, ``h``, ``MiB``, ``steps/s``)."""
+    what: str
+    unit: str
+    values: list[float]
+    median: float = field(init=False)
+    min: float = field(init=False)
+    max: float = field(init=False)
+    rounds: int = field(init=False)
+
+    def __post_init__(self):
+        self.values = [float(value) for value in self.values]
+        if not self.values:
+            raise ValueError(f"{self.what}: a measure needs at least one value")
+        self.median, self.min, self.max = statistics.median(self.values), min(self.values), max(self.values)
+        self.rounds = len(self.values)
+
+
+def add_results_flag(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--results", type=Path, default=RESULTS, metavar="FOLDER",
+                        help="where the run's JSON record is written (default: benchmarks/results)")
+
+
+def cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return " ".join(line.split(":", 1)[1].split())
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def commit() -> str:
+    """The checkout's commit, ``+changes`` when tracked files differ from it; ``unknown`` outside git."""
+    def git(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run(["git", "-C", str(ROOT), *args], capture_output=True, text=True)
+    try:
+        head = git("rev-parse", "--short=12", "HEAD")
+        if head.returncode:
+            return "unknown"
+        return head.stdout.strip() + ("+changes" if git("diff", "--quiet", "HEAD").returncode else "")
+    except OSError:
+        return "unknown"
+
+
+def versions(extra: tuple[str, ...] = ()) -> dict[str, str]:
+    found = {"python": platform.python_version()}
+    for name in (*VERSIONS, *extra):
+        try:
+            found[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            found[name] = "not installed"
+    return found
+
+
+def load() -> float:
+    return os.getloadavg()[0]
+
+
+class Record:
+    """The record of one run of a benchmark script. Made at the start of the run (the load before it),
+    given measures as they are taken, written at the end (the load after it)."""
+
+    def __init__(self, name: str, extra_versions: tuple[str, ...] = ()):
+        script = Path(sys.argv[0]).resolve()
+        shown = script.relative_to(ROOT) if script.is_relative_to(ROOT) else script
+        self.name = re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
+        self.started = datetime.now(UTC)
+        self.fields = {"command": shlex.join(["python", str(shown), *sys.argv[1:]]), "commit": commit(),
+                       "date": self.started.isoformat(timespec="seconds"), "cpu": cpu_model(),
+                       "cores": os.cpu_count(), "versions": versions(extra_versions), "load_before": load()}
+        self.measures: dict[str, Measure] = {}
+        self.notes: dict[str, object] = {}
+
+    def add(self, key: str, what: str, unit: str, values) -> Measure:
+        if key in self.measures:
+            raise ValueError(f"{key}: measured twice in one record")
+        self.measures[key] = Measure(what, unit, list(values))
+        return self.measures[key]
+
+    def note(self, key: str, value) -> None:
+        """A result that is not a figure (an identity check, the largest difference found)."""
+        self.notes[key] = value
+
+    def write(self, folder: Path) -> Path:
+        after = load()
+        cores = self.fields["cores"]
+        loaded = max(self.fields["load_before"], after) > cores
+        body = {**self.fields, "load_after": after, "loaded": loaded,
+                "measures": {key: asdict(measure) for key, measure in self.measures.items()}, "notes": self.notes}
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / f"{self.name}-{self.started:%Y%m%dT%H%M%SZ}.json"
+        path.write_text(json.dumps(body, indent=1) + "\n")
+        shown = path.relative_to(ROOT) if path.is_relative_to(ROOT) else path
+        state = (f"LOADED: load average {max(self.fields['load_before'], after):.2f} on {cores} cores, not "
+                 "publishable" if loaded else f"load average {self.fields['load_before']:.2f} -> {after:.2f} on "
+                 f"{cores} cores")
+        short = [key for key, measure in self.measures.items() if measure.rounds < MIN_ROUNDS]
+        if short:
+            state += (f"; {', '.join(short) if len(short) < 4 else f'{len(short)} measures'} of fewer than "
+                      f"{MIN_ROUNDS} rounds, not publishable")
+        print(f"record: {shown} ({state})")
+        return path
+
+
+def read(path: Path) -> dict:
+    """A record as written, its measures as dicts; ValueError naming the file if it is not one."""
+    try:
+        record = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as error:
+        raise ValueError(f"{path}: not a benchmark record ({error})") from error
+    missing = {"command", "commit", "date", "cpu", "cores", "versions", "load_before", "load_after", "loaded",
+               "measures"} - set(record)
+    if missing:
+        raise ValueError(f"{path}: not a benchmark record (no {', '.join(sorted(missing))})")
+    return record
