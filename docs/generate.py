@@ -1,24 +1,36 @@
 #!/usr/bin/env python
-"""Write the flag tables of the docs from the scripts' own argparse parsers.
+"""Write the docs' flag tables from the scripts' own argparse parsers, and their measured figures from the
+benchmarks' records.
 
 Between ``<!-- flags:SCRIPT -->`` and ``<!-- end flags -->`` a page holds the table of SCRIPT's flags, as
 its parser declares them (option strings, default, help, choices). ``<!-- flags:SCRIPT except OTHER -->``
-lists only the flags OTHER lacks. ``python docs/generate.py`` rewrites the tables of every page of
-``docs/``; ``--check`` rewrites nothing and exits 1 naming the pages whose tables differ (tests/test_docs.py
-runs the same check). The parsers are imported, never read from ``--help``.
+lists only the flags OTHER lacks. The parsers are imported, never read from ``--help``.
+
+Between ``<!-- figure:RECORD MEASURE -->`` and ``<!-- end figure -->`` a page (README.md, experiments/README.md
+or ``docs/``) holds one measured figure: the median of MEASURE in ``benchmarks/results/RECORD.json``, its
+range over the rounds and the machine, linked to the record ("9.31× (8.92–9.60), AMD EPYC, 2 cores"). A
+record marked loaded, or a measure of fewer than 5 rounds, is refused (docs/development.md, "Benchmark
+discipline").
+
+``python docs/generate.py`` rewrites the tables and figures of every page; ``--check`` rewrites nothing and
+exits 1 naming the pages that differ (tests/test_docs.py runs the same check).
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import re
 import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+for folder in (ROOT, ROOT / "benchmarks"):
+    if str(folder) not in sys.path:
+        sys.path.insert(0, str(folder))
+
+import record as records  # noqa: E402  (benchmarks/record.py: what a record holds)
 
 MARKER = re.compile(r"(<!-- flags:(?P<script>\S+)(?: except (?P<other>\S+))? -->\n)(?P<table>.*?)(<!-- end flags -->)",
                     re.DOTALL)
@@ -85,30 +97,81 @@ def table(script: str, other: str | None = None) -> str:
     return "\n".join(rows) + "\n"
 
 
-def render(text: str) -> str:
-    """``text`` with every flag table rewritten from the parsers."""
-    return MARKER.sub(lambda match: match[1] + table(match["script"], match["other"]) + match[5], text)
+FIGURE = re.compile(r"(<!-- figure:(?P<record>[\w.-]+) (?P<measure>\w+) -->)(?P<text>.*?)(<!-- end figure -->)")
+UNITS = {"x": "×", "": "", "us": " µs"}  # any other unit is written after a space as it is ("ms", "h", "steps/s")
+
+
+class FigureError(ValueError):
+    """A figure that cannot be published: no such record or measure, a loaded record, too few rounds."""
+
+
+def number(value: float) -> str:
+    """Three significant digits or so: 1,005 / 17.6 / 9.31 / 0.862."""
+    size = abs(value)
+    return f"{value:,.0f}" if size >= 100 else f"{value:.1f}" if size >= 10 else f"{value:.2f}" if size >= 1 \
+        else f"{value:.3f}"
+
+
+def figure(name: str, measure: str, page: Path, results: Path = records.RESULTS) -> str:
+    """The text of one figure: median, range and machine, linked (from ``page``) to its record."""
+    path = results / f"{name}.json"
+    if not path.is_file():
+        raise FigureError(f"{name}: no record {path.relative_to(ROOT) if path.is_relative_to(ROOT) else path}")
+    record = records.read(path)
+    if record["loaded"]:
+        raise FigureError(f"{name}: taken at load {max(record['load_before'], record['load_after']):.2f} on "
+                          f"{record['cores']} cores (loaded); measure again on a quiet machine")
+    if measure not in record["measures"]:
+        raise FigureError(f"{name}: no measure {measure!r} (it has {', '.join(record['measures'])})")
+    values = record["measures"][measure]
+    if values["rounds"] < records.MIN_ROUNDS:
+        raise FigureError(f"{name} {measure}: {values['rounds']} rounds; a figure is the median of at least "
+                          f"{records.MIN_ROUNDS}")
+    unit = UNITS.get(values["unit"], " " + values["unit"])
+    text = (f"{number(values['median'])}{unit} ({number(values['min'])}–{number(values['max'])}), {record['cpu']}, "
+            f"{record['cores']} cores")
+    return f"[{text}]({Path(os.path.relpath(path, page.parent)).as_posix()})"
+
+
+def render_figures(text: str, page: Path, results: Path = records.RESULTS) -> str:
+    """``text`` with every figure rewritten from its record; FigureError for one that cannot be published."""
+    return FIGURE.sub(lambda match: match[1] + figure(match["record"], match["measure"], page, results) + match[5],
+                      text)
+
+
+def render(text: str, page: Path | None = None) -> str:
+    """``text`` with every flag table rewritten from the parsers, and, given its ``page``, every figure from
+    its record."""
+    text = MARKER.sub(lambda match: match[1] + table(match["script"], match["other"]) + match[5], text)
+    return text if page is None else render_figures(text, page)
 
 
 def pages() -> list[Path]:
-    return sorted((ROOT / "docs").glob("*.md"))
+    """The pages whose figures come from the records (and, in docs/, whose flag tables come from the parsers)."""
+    return [ROOT / "README.md", ROOT / "experiments" / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     parser.add_argument("--check", action="store_true", help="write nothing; exit 1 if a table differs")
     args = parser.parse_args(argv)
-    stale = []
+    stale, refused = [], []
     for page in pages():
         text = page.read_text()
-        generated = render(text)
+        try:
+            generated = render(text, page)
+        except FigureError as error:
+            refused.append(f"{page.relative_to(ROOT)}: {error}")
+            continue
         if generated != text:
             stale.append(page.relative_to(ROOT))
             if not args.check:
                 page.write_text(generated)
     if stale:
-        print(("differ from the parsers: " if args.check else "rewritten: ") + ", ".join(map(str, stale)))
-    return 1 if stale and args.check else 0
+        print(("differ from the parsers or records: " if args.check else "rewritten: ") + ", ".join(map(str, stale)))
+    for line in refused:
+        print(f"refused, left as it is: {line}", file=sys.stderr)
+    return 1 if refused or (stale and args.check) else 0
 
 
 if __name__ == "__main__":

@@ -412,6 +412,8 @@ def shrink(script: str, args: list[str], folder: PageFolder) -> list[str]:
         shrunk += ["--folder", str(folder.path / "runs" / Path(script).stem)]
     if script.endswith("compare.py") and "--arms" not in args:
         shrunk += ["--arms", "static"]  # each arm is two processes
+    if script.startswith("benchmarks/") and "--results" not in args:  # a shrunk run's record is no record
+        shrunk += ["--results", str(folder.path / "records")]
     return shrunk + extra
 
 
@@ -452,10 +454,14 @@ def run(command: Command, folder: PageFolder, launch) -> None:
     args = expand(shrink(script_word, args, folder), folder.path)
     bring_files(command, args, folder)
     before = folder.run_folders()
+    records = Path(args[args.index("--results") + 1]) if "--results" in args else folder.path / "records"
+    recorded = len(list(records.glob("*.json")))
     log = folder.path / f"line{command.line}.log"
     code = launch([str(folder.path / script_word), *args], folder.path, log)
     folder.runs += sorted(folder.run_folders() - before, key=lambda path: path.stat().st_mtime)
     assert code == 0, f"{command.name}: {shlex.join([script_word, *args])} exited {code}:\n{log.read_text()[-3000:]}"
+    if script_word.startswith("benchmarks/"):
+        assert len(list(records.glob("*.json"))) > recorded, f"{command.name}: wrote no record in {records}"
 
 
 def run_in_order(command: Command, folders, launch) -> None:
@@ -510,6 +516,64 @@ def test_flag_tables_match_the_parsers():
             assert match["table"] == generate.table(match["script"], match["other"]), (
                 f"{page.relative_to(ROOT)}: the table of {match['script']} differs from its parser; "
                 "run python docs/generate.py")
+
+
+def test_figures_are_their_records():
+    """Each measured figure of README.md, experiments/README.md and docs/ is what docs/generate.py renders from
+    its record in benchmarks/results/ now: the record exists, is not marked loaded, has at least 5 rounds."""
+    for page in generate.pages():
+        text = page.read_text()
+        try:
+            rendered = generate.render_figures(text, page)
+        except generate.FigureError as error:
+            pytest.fail(f"{page.relative_to(ROOT)}: {error}")
+        assert rendered == text, (
+            f"{page.relative_to(ROOT)}: a figure differs from its record; run python docs/generate.py")
+
+
+def a_record(folder: Path, name: str, loaded: bool = False, rounds: int = 5) -> Path:
+    values = [9.0 + 0.1 * index for index in range(rounds)]
+    measure = {"what": "a ratio", "unit": "x", "values": values, "median": values[len(values) // 2], "min": values[0],
+               "max": values[-1], "rounds": rounds}
+    body = {"command": "python benchmarks/x.py", "commit": "0" * 12, "date": "2026-01-01T00:00:00+00:00",
+            "cpu": "AMD EPYC", "cores": 2, "versions": {}, "load_before": 3.5 if loaded else 0.2, "load_after": 0.3,
+            "loaded": loaded, "measures": {"env_step": measure}, "notes": {}}
+    path = folder / f"{name}.json"
+    path.write_text(json.dumps(body))
+    return path
+
+
+def test_a_figure_is_rendered_from_its_record_and_checked(tmp_path):
+    a_record(tmp_path, "quiet")
+    page = ROOT / "docs" / "speed.md"
+    text = "stepped <!-- figure:quiet env_step -->10×<!-- end figure --> faster"
+    rendered = generate.render_figures(text, page, tmp_path)
+    link = os.path.relpath(tmp_path / "quiet.json", page.parent)
+    assert rendered == f"stepped <!-- figure:quiet env_step -->[9.20× (9.00–9.40), AMD EPYC, 2 cores]({link})" \
+                       "<!-- end figure --> faster"
+    assert generate.render_figures(rendered, page, tmp_path) == rendered  # the check the pages pass
+
+
+@pytest.mark.parametrize(("kind", "message"), [("loaded", "loaded"), ("short", "3 rounds"), ("missing", "no record"),
+                                               ("measure", "no measure 'reset'")])
+def test_a_figure_that_cannot_be_published_is_refused(tmp_path, kind, message):
+    a_record(tmp_path, "loaded", loaded=True)
+    a_record(tmp_path, "short", rounds=3)
+    a_record(tmp_path, "measure")
+    measure = "reset" if kind == "measure" else "env_step"
+    text = f"<!-- figure:{kind} {measure} --><!-- end figure -->"
+    with pytest.raises(generate.FigureError, match=message):
+        generate.render_figures(text, ROOT / "README.md", tmp_path)
+
+
+def test_every_benchmark_writes_a_record():
+    """Each script of benchmarks/ takes --results (benchmarks/record.py writes its record there)."""
+    scripts = sorted(path for path in (ROOT / "benchmarks").glob("*.py") if path.name != "record.py")
+    assert scripts
+    for script in scripts:
+        source = script.read_text()
+        assert "add_results_flag(parser)" in source and ".write(args.results)" in source, (
+            f"{script.relative_to(ROOT)} writes no record (benchmarks/record.py)")
 
 
 def table_commands() -> list[tuple[str, list[str]]]:
