@@ -99,7 +99,7 @@ def write_outputs(args: argparse.Namespace, command: list[str], kind: str, repor
     """The --json and --plot files the user asked for (the video is written during its episode)."""
     from envs.evaluation import trace_episode
     from es.files import write_json
-    from report.adaptation import plot_adaptation
+    from report.adaptation import plot_adaptation, steps_text
 
     if args.json:
         write_json(Path(args.json), {"kind": kind, "command": command, "episodes": args.episodes, "seed": args.seed,
@@ -110,7 +110,7 @@ def write_outputs(args: argparse.Namespace, command: list[str], kind: str, repor
     if args.plot:
         trace = trace_episode(problem, params, args.seed)
         plot_adaptation(trace, args.plot)
-        say(f"adaptation plot ({trace.env_id}, seed {args.seed}, {len(trace.rewards)} steps): {args.plot}")
+        say(f"adaptation plot ({trace.env_id}, seed {args.seed}, {steps_text(trace)}): {args.plot}")
 
 
 def show(report) -> None:

@@ -16,6 +16,19 @@ from envs.evaluation import Trace
 from report.plots import write_figure
 
 
+def burn_in(trace: Trace) -> int:
+    """The steps of zero actions before the first policy step (the pyBullet ant's 40), which the episode's
+    step count includes and the trace has no data for."""
+    return trace.episode.steps - len(trace.rewards)
+
+
+def steps_text(trace: Trace) -> str:
+    """The episode's length as the evaluation table counts it, with its burn-in: "242 steps, the first 40
+    of them burn-in"."""
+    skipped = burn_in(trace)
+    return f"{trace.episode.steps} steps" + (f", the first {skipped} of them burn-in" if skipped else "")
+
+
 def plot_adaptation(trace: Trace, path: str | Path) -> None:
     """A picture of the trace (PNG, PDF or SVG, as the suffix says); drawn with matplotlib's Agg canvas, so
     no display is ever needed."""
@@ -27,7 +40,8 @@ def plot_adaptation(trace: Trace, path: str | Path) -> None:
     figure = Figure(figsize=(8, 3.2 * panels), layout="constrained")
     FigureCanvasAgg(figure)
     axes = figure.subplots(panels, 1, sharex=True, squeeze=False)[:, 0]
-    steps = np.arange(1, len(trace.rewards) + 1)
+    skipped = burn_in(trace)  # drawn on the environment's steps, as the evaluation table counts them
+    steps = np.arange(skipped + 1, skipped + len(trace.rewards) + 1)
     if trace.distances:
         axes[0].plot(steps, trace.distances, color="tab:blue", label="straight-line distance")
         axes[0].plot(steps, trace.forward, color="tab:orange", label="forward (x) displacement")
@@ -37,7 +51,8 @@ def plot_adaptation(trace: Trace, path: str | Path) -> None:
     else:
         axes[0].plot(steps, trace.rewards, color="tab:blue", linewidth=0.8)
         axes[0].set_ylabel("reward per step")
-    axes[0].set_title(f"{trace.env_id}, seed {trace.seed}: return {trace.episode.total_return:.2f}")
+    axes[0].set_title(f"{trace.env_id}, seed {trace.seed}: return {trace.episode.total_return:.2f}, "
+                      f"{steps_text(trace)}")
     if trace.layer_norms:
         norms = np.array(trace.layer_norms)
         for layer, (n_out, n_in) in enumerate(trace.layer_shapes):
@@ -45,6 +60,6 @@ def plot_adaptation(trace: Trace, path: str | Path) -> None:
         axes[1].set_ylabel("weight norm (Frobenius)")
         axes[1].set_yscale("log")
         axes[1].legend(loc="best")
-    axes[-1].set_xlabel("policy step")
+    axes[-1].set_xlabel("environment step" + (f" (1-{skipped}: burn-in, zero actions, not drawn)" if skipped else ""))
     axes[-1].xaxis.set_major_locator(MaxNLocator(integer=True))
     write_figure(figure, Path(path), dpi=100)

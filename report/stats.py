@@ -299,13 +299,18 @@ def csv_text(rows: list[dict]) -> str:
 
 
 def figure(summaries: list[Summary], curves: dict, taus: np.ndarray, pairs: list[Improvement]):
-    """Three panels: IQM and mean with their intervals, performance profiles, probabilities of improvement."""
+    """Three panels: IQM and mean with their intervals, performance profiles, probabilities of improvement.
+
+    Groups often tie (several strategies ending every run at CartPole's 500), so each profile has its own
+    colour, line style and marker, the markers of group k at every k-th τ from its own offset: curves that
+    coincide stay told apart. The constrained layout gives each panel the room its labels need, no more."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    figure = Figure(figsize=(14, 3.8), dpi=100)
+    figure = Figure(figsize=(14, 3.8), dpi=100, layout="constrained")
     FigureCanvasAgg(figure)
-    left, middle, right = figure.subplots(1, 3)
+    left, middle, right = figure.subplots(1, 3, width_ratios=(1, 1.2, 1))
+    styles, markers = ("-", "--", "-.", ":"), ("o", "s", "^", "D", "v", "P", "X", "*")
     for row, summary in enumerate(summaries):
         colour = f"C{row % 10}"
         estimates = ((summary.iqm, summary.iqm_low, summary.iqm_high, "o"),
@@ -314,7 +319,9 @@ def figure(summaries: list[Summary], curves: dict, taus: np.ndarray, pairs: list
             left.errorbar([point], [row + 0.15 - 0.3 * offset], xerr=[[point - low], [high - point]], fmt=marker,
                           color=colour, capsize=3, label=("IQM" if offset == 0 else "mean") if row == 0 else None)
         fraction, low, high = curves[summary.group]
-        middle.plot(taus, fraction, color=colour, label=summary.group)
+        middle.plot(taus, fraction, color=colour, label=summary.group, linestyle=styles[row % len(styles)],
+                    marker=markers[row % len(markers)], markevery=(row % len(summaries), len(summaries)),
+                    markersize=5)
         middle.fill_between(taus, low, high, color=colour, alpha=0.2, linewidth=0)
     left.set_yticks(range(len(summaries)), [summary.group for summary in summaries])
     left.set_title("IQM (o) and mean (s), 95 % CI", fontsize=10)
@@ -328,11 +335,10 @@ def figure(summaries: list[Summary], curves: dict, taus: np.ndarray, pairs: list
                        fmt="o", color="C0", capsize=3)
     right.axvline(0.5, color="grey", linestyle=":")
     right.set_xlim(0, 1)
-    right.set_yticks(range(len(pairs)), [f"P({pair.x} > {pair.y})" for pair in pairs])
+    right.set_yticks(range(len(pairs)), [f"P({pair.x} > {pair.y})" for pair in pairs], fontsize=8)
     right.set_title("probability of improvement, 95 % CI", fontsize=10)
     for axes in (left, middle, right):
         axes.grid(alpha=0.3)
-    figure.tight_layout()
     return figure
 
 
