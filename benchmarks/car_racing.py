@@ -30,7 +30,8 @@ on both alike; the medians over rounds are printed.
   (``policies.conv``: not bit for bit; docs/speed-carracing.md) against the stock class's with the default CNN,
   and its projection;
 - ``--memory``: ``train_hebb.py`` at the paper's population (200) with 2 workers for one
-  generation, its processes' summed PSS and USS (``/proc/PID/smaps_rollup``) sampled while it runs;
+  generation, its processes' summed PSS and USS (``/proc/PID/smaps_rollup``) sampled while it runs,
+  once per round;
 - ``--identity``: episodes of up to 1000 steps on seeds and drivers that no test uses, observations,
   rewards, flags and info compared at every step and ``rgb_array`` frames every ``--frame_every``
   steps; exit code 1 on the first difference.
@@ -460,7 +461,8 @@ def main() -> int:
     parser.add_argument("--length", type=positive_int, default=FULL_EPISODE,
                         help="steps of a capped episode (the projection's cost per step)")
     parser.add_argument("--share_steps", type=positive_int, default=600, help="steps measured for the policy's share")
-    parser.add_argument("--memory", action="store_true", help="also measure the paper's Hebbian run's memory")
+    parser.add_argument("--memory", action="store_true",
+                        help="also measure the paper's Hebbian run's memory (one generation per round)")
     parser.add_argument("--fast_conv", action="store_true",
                         help="also the capped Hebbian loop and the projection with the opt-in compiled CNN")
     parser.add_argument("--identity", action="store_true", help="also compare long episodes frame by frame")
@@ -508,14 +510,16 @@ def main() -> int:
 
     print(f"peak memory of this process: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB (RSS)")
     if args.memory:
-        pss, uss, processes = paper_run_memory(2, PAPER_POPSIZE)
-        for name, value in (("pss", pss), ("uss", uss)):
+        samples = [paper_run_memory(2, PAPER_POPSIZE) for _ in range(args.rounds)]
+        processes = max(sample[2] for sample in samples)
+        for index, name in enumerate(("pss", "uss")):
             record.add(f"memory_{name}", f"train_hebb.py CarRacing-v0 ABCD_lr, popsize {PAPER_POPSIZE}, 2 workers, "
-                       f"one generation: peak {name.upper()} summed over its {processes} processes", "MiB",
-                       [value / 2**20])
-        print(f"memory, train_hebb.py CarRacing-v0 ABCD_lr, popsize {PAPER_POPSIZE}, 2 workers, one generation: "
-              f"peak PSS {pss / 2**20:.0f} MiB, peak USS {uss / 2**20:.0f} MiB over {processes} processes "
-              f"(target < 1 GB)")
+                       f"one generation per round: peak {name.upper()} summed over its processes", "MiB",
+                       [sample[index] / 2**20 for sample in samples])
+        pss, uss = (statistics.median(sample[index] for sample in samples) / 2**20 for index in (0, 1))
+        print(f"memory, train_hebb.py CarRacing-v0 ABCD_lr, popsize {PAPER_POPSIZE}, 2 workers, one generation, "
+              f"median of {args.rounds} runs: peak PSS {pss:.0f} MiB, peak USS {uss:.0f} MiB over {processes} "
+              "processes (target < 1 GB)")
     if args.identity:
         print(f"identity: {args.episodes_compared} episodes of up to 1000 steps, frames every {args.frame_every} steps")
         same = identity(args.episodes_compared, args.frame_every)

@@ -97,7 +97,8 @@ def table(script: str, other: str | None = None) -> str:
     return "\n".join(rows) + "\n"
 
 
-FIGURE = re.compile(r"(<!-- figure:(?P<record>[\w.-]+) (?P<measure>\w+) -->)(?P<text>.*?)(<!-- end figure -->)")
+# (a marker quoted as inline code, `<!-- figure:... -->`, is an example, not a figure)
+FIGURE = re.compile(r"(?<!`)(<!-- figure:(?P<record>[\w.-]+) (?P<measure>\w+) -->)(?P<text>.*?)(<!-- end figure -->)")
 UNITS = {"x": "×", "": "", "us": " µs"}  # any other unit is written after a space as it is ("ms", "h", "steps/s")
 
 

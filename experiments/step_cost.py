@@ -16,7 +16,8 @@ load on the machine does not inflate it, and projects
 
 for episodes of ``--length`` environment steps (1000, the TimeLimit, reached by a policy that
 survives: 960 policy steps after the ant's burn-in). It ignores
-the master's work and assumes the workers scale linearly (1.9x on 2 cores, environment-notes §5).
+the master's work and assumes the workers scale linearly (``benchmarks/throughput.py --scaling``
+measures how far they do from 1 to 2).
 """
 
 from __future__ import annotations

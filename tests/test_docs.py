@@ -531,6 +531,27 @@ def test_figures_are_their_records():
             f"{page.relative_to(ROOT)}: a figure differs from its record; run python docs/generate.py")
 
 
+# a measured speed typed into a page: 9.3×, 505 µs, 4.3 ms per step, 651 steps/s, 2.0 h on 16 workers (a target is
+# written "≥ 8×"; "84×84" and "4 × CPUs" are sizes and products)
+TYPED_SPEED = re.compile(r"(?<![\d.,])(?<![≥≤<>])(?<![≥≤<>] )\d[\d,]*(?:\.\d+)?(?:×(?![\d·])|\s?µs\b|\s?ms per\b"
+                         r"|\s?steps/s\b|\s?h on \d+ workers)")
+
+
+def test_no_speed_figure_is_typed_into_a_page():
+    """A speed or comparison figure is rendered from a record (a figure marker), never typed: outside markers,
+    code and inline code, no page holds one."""
+    typed = []
+    for page in generate.pages():
+        fenced = False
+        for number, line in enumerate(page.read_text().splitlines(), 1):
+            fenced ^= line.startswith("```")
+            text = re.sub(r"`[^`]*`", "", generate.FIGURE.sub("", line))
+            typed += [f"{page.relative_to(ROOT)}:{number}: {match[0]}" for match in TYPED_SPEED.finditer(text)
+                      if not fenced]
+    assert not typed, "speed figures typed into the docs (render them from records: docs/development.md):\n" + (
+        "\n".join(typed))
+
+
 def a_record(folder: Path, name: str, loaded: bool = False, rounds: int = 5) -> Path:
     values = [9.0 + 0.1 * index for index in range(rounds)]
     measure = {"what": "a ratio", "unit": "x", "values": values, "median": values[len(values) // 2], "min": values[0],
