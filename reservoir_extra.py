@@ -1,6 +1,6 @@
 """The reservoirs' optional extra (``pip install -r requirements-reservoirs.txt``): the packages it
 needs, how to install them, whether they are there; and ER-MRL's search bounds (Léger et al. 2024,
-upstream spec §8.2).
+docs/original.md, "ER-MRL").
 
 A leaf of the import graph: it imports nothing of the project and nothing heavy. The ES front end
 (``policies.reservoir``, ``policies.registry``) and the ER-MRL scripts (``reservoirs.launch``,

@@ -1,9 +1,10 @@
 """``train_static.py`` and ``train_hebb.py``: their flags, the run's configuration, start and resume.
 
 The flags are the settings' declarations (``settings``, ``cli.flags``): the original's names and defaults
-(upstream spec §1), and new ones in the same snake_case style. A new run's settings come from the flags,
-over an experiment file given with ``--config``, over the defaults; a resumed run's from its config.json,
-where only the settings declared resumable may be given other values (``TrainConfig.overlay``).
+(docs/original.md, "Command lines"), and new ones in the same snake_case style. A new run's settings
+come from the flags, over an experiment file given with ``--config``, over the defaults; a resumed run's
+from its config.json, where only the settings declared resumable may be given other values
+(``TrainConfig.overlay``).
 """
 
 from __future__ import annotations

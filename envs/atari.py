@@ -14,7 +14,7 @@ The family's pipeline (``atari_pipeline``), innermost first:
   whose environment already skips frames (``Deterministic``: 4; ``ALE/...-v5``: 4; plain ``-v4``: 2-4
   at random) get ``frame_skip=1`` instead, so frames are never skipped twice: an agent step is
   always the id's own skip, or 4 frames for ``NoFrameskip`` ids.
-- ``FireReset`` (the original's ``FireEpisodicLifeEnv``, upstream spec §5), for games whose action
+- ``FireReset`` (the original's ``FireEpisodicLifeEnv``, docs/original.md, "Episodes"), for games whose action
   meanings include FIRE.
 - the observation the network expects: 84 x 84 grayscale in [0, 1] stacked over the last 4 steps
   (``FrameStackObservation``), shape (4, 84, 84), for the static CNN and the Hebbian network; or
@@ -91,7 +91,7 @@ def is_atari(env: gym.Env) -> bool:
 
 class FireReset(gym.Wrapper):
     """Press FIRE, then action 2, after every reset and after every lost life (the original's
-    ``FireEpisodicLifeEnv``, upstream spec §5): games such as Breakout stand still until FIRE.
+    ``FireEpisodicLifeEnv``, docs/original.md, "Episodes"): games such as Breakout stand still until FIRE.
 
     As in the original, a lost life does not end the episode, the presses' rewards are dropped and
     the observation returned is the one after the second press; a press that ends the game is

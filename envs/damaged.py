@@ -2,7 +2,7 @@
 
 The paper trains one network on the standard ant and on an ant whose right front lower leg is a
 quarter of its length, then walks it on a third body it never saw, with the left front lower leg
-shortened instead (upstream spec §5.4). The original repository shipped the two MJCF files and left
+shortened instead (docs/original.md, "The damaged ants"). The original repository shipped the two MJCF files and left
 their registration, and the averaging over bodies, to the user.
 
 Each damage is one ``fromto`` attribute (0.4 -> 0.1 along both axes: the lower leg shrinks from
@@ -17,7 +17,7 @@ front-right one.
     AntAsymRight-v5             same, right                               envs/assets/
 
 The MuJoCo files edit Gymnasium's own ``ant.xml``: pyBullet's has no free root joint and no floor,
-so Ant-v5 would weld its torso to the world (environment-notes §4). The pyBullet environments
+so Ant-v5 would weld its torso to the world. The pyBullet environments
 subclass ``AntBulletEnv``, so they get the whole pyBullet-ant recipe (burn-in, progress reward,
 early stop, tanh output) from ``envs.recipes`` by class, not by name.
 

@@ -3,7 +3,7 @@
 Each listed environment runs ``episodes`` episodes with seeds ``seed, seed + 1, ...`` through the
 same rollout as training. The paper reports mean ± standard deviation over 100 rollouts
 (Najarro & Risi 2020, as cited from its Table 1); the original code ran one random episode and left
-the statistics to the user (upstream spec §5.3). The std is numpy's (population) std.
+the statistics to the user (docs/original.md, "Episodes"). The std is numpy's (population) std.
 
 For ant environments (pyBullet ants, including the damaged ones, and MuJoCo Ant-v4/v5) each
 episode also reports the **distance walked**: the straight-line distance, in metres, between the

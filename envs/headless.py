@@ -1,7 +1,7 @@
 """Headless rendering of MuJoCo: a GL backend chosen only when frames are asked for.
 
 MuJoCo picks its GL backend from ``MUJOCO_GL`` when it is first imported, and under
-``MUJOCO_GL=egl`` on a machine without libEGL even ``import mujoco`` fails (environment notes §9).
+``MUJOCO_GL=egl`` on a machine without libEGL even ``import mujoco`` fails.
 Training never renders, so nothing here runs for it and ``MUJOCO_GL`` stays as the user left it.
 When frames are wanted (``--video``, ``--render``) and the user set no backend and there is no
 display, the first one whose library loads is chosen: EGL, then OSMesa. If none loads, rendering a

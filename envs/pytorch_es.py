@@ -1,4 +1,4 @@
-"""pytorch-es's image preprocessing (atgambardella/pytorch-es ``envs.py``, upstream spec §7.3).
+"""pytorch-es's image preprocessing (atgambardella/pytorch-es ``envs.py``, docs/original.md, "pytorch-es").
 
 pytorch-es (after ikostrikov/pytorch-a3c and universe-starter-agent) fed its conv-LSTM with:
 

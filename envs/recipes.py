@@ -1,4 +1,4 @@
-"""Per-family environment behaviour of the original code, as data (upstream spec §4.3, §5).
+"""Per-family environment behaviour of the original code, as data (docs/original.md, "Hebbian rules" and "Episodes").
 
 The original chose behaviour with string tests on exact ids inside the episode loop
 (``environment == 'CarRacing-v0'``, ``environment[-12:-6] == 'Bullet'``), so a renamed or custom

@@ -1,4 +1,4 @@
-"""One small Gymnasium wrapper per environment quirk (upstream spec §5).
+"""One small Gymnasium wrapper per environment quirk (docs/original.md, "Episodes").
 
 Each wrapper does one thing and validates its arguments; ``envs.recipes`` decides which ones an
 environment family gets. Artificial cut-offs are reported as ``truncated``, never ``terminated``.

@@ -1,6 +1,6 @@
 """pytorch-es's fitness shaping: the NES utilities of Wierstra et al. (2014), as pytorch-es computed them.
 
-atgambardella/pytorch-es ``train.py`` (``fitness_shaping``, upstream spec §7.4), with the log-base fix
+atgambardella/pytorch-es ``train.py`` (``fitness_shaping``, docs/original.md, "pytorch-es"), with the log-base fix
 of its PR #8 (60bffea): with lambda members and rank k (1 = best),
 
     u_k = max(0, log2(lambda/2 + 1) - log2 k) / sum_m max(0, log2(lambda/2 + 1) - log2 k_m) + 1/lambda

@@ -1,7 +1,8 @@
 """Running observation statistics for ``--obs_norm`` (OpenAI's ``RunningStat``), and their files.
 
 Salimans et al. (2017) normalise the observations a network sees by a running mean and standard
-deviation (openai/evolution-strategies-starter, ``es_distributed/es.py``, spec §2.5). As there:
+deviation (openai/evolution-strategies-starter, ``es_distributed/es.py``; docs/original.md, "The
+evolution strategy"). As there:
 
 - the statistics are sums: ``sum``, ``sumsq`` (starting at ``EPS``) and ``count`` (starting at ``EPS``,
   1e-2, so that with no data mean = 0 and std = 1: the identity);

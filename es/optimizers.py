@@ -6,12 +6,12 @@ the population size N, sigma, the learning rate and its own state (a dict of arr
 checkpoint so that a resumed run steps exactly as one that never stopped). How the gradient
 estimate is normalised follows each optimiser's source:
 
-- ``sgd``, the original (Najarro & Risi 2020; upstream spec §2.1 step 5): the estimate of
+- ``sgd``, the original (Najarro & Risi 2020; docs/original.md, "The evolution strategy"): the estimate of
   Salimans et al. (2017) of the gradient of the smoothed objective, g = sum_m F_m eps_m / (N sigma),
   and theta += lr * g, computed as ``theta + (lr / (N sigma)) * weighted_sum`` so that its results
   are bit-identical to the original formula.
-- ``adam`` and ``momentum``, OpenAI's (spec §2.5): g = sum_m F_m eps_m / N, i.e. divided by the
-  number of returns and *not* by sigma, as es-starter does. Adam is invariant to the scale of g
+- ``adam`` and ``momentum``, OpenAI's (docs/original.md, "The evolution strategy"): g = sum_m F_m eps_m
+  / N, i.e. divided by the number of returns and *not* by sigma, as es-starter does. Adam is invariant to the scale of g
   (up to its epsilon), so this matters only for the balance with ``l2coeff``, which then means
   what it means in es-starter's configurations (e.g. humanoid.json's 0.005).
 

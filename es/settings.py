@@ -3,13 +3,14 @@
 
 Each field is the one declaration of its option (``settings.setting``): its default, range or choices,
 flag, help, and whether a resume may change it. Every constant the original hard-coded is a field here,
-with the original's value as its default (upstream spec §2.1, §9.1 item 7): the learning-rate floor, the
+with the original's value as its default (docs/original.md, "The evolution strategy"): the learning-rate floor, the
 sigma decay and floor, and the L2 coefficient of the fitness penalty; those have no flag (experiment files
 and config.json only). The options beyond the original (the shaping, the optimiser, weight decay in the
-gradient, observation statistics, centre evaluation; OpenAI's es-starter and pytorch-es, spec §2.5 and
-§7.4) default to the original's behaviour. The strategy (``--strategy``, ``es.strategies``; default
-openai, the original's) and each strategy's settings are one block of fields, each requiring the strategy
-it belongs to; the openai-only settings require ``--strategy openai``.
+gradient, observation statistics, centre evaluation; OpenAI's es-starter and pytorch-es, docs/original.md,
+"The evolution strategy" and "pytorch-es") default to the original's behaviour. The strategy
+(``--strategy``, ``es.strategies``; default openai, the original's) and each strategy's settings are one
+block of fields, each requiring the strategy it belongs to; the openai-only settings require
+``--strategy openai``.
 """
 
 from __future__ import annotations

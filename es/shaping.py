@@ -1,16 +1,19 @@
 """Fitness: the original's L2 penalty, and fitness shaping (rank transforms) before the step.
 
-Najarro & Risi (2020), as the OpenAI-ES of Salimans et al. (2017) they adapt (upstream spec §2.1):
+Najarro & Risi (2020), as the OpenAI-ES of Salimans et al. (2017) they adapt (docs/original.md, "The
+evolution strategy"):
 the fitness of member m is its episode return minus ``fitness_l2 * mean(theta_m^2)`` over the
 penalised part of its parameters (all static weights; the Hebbian coefficients only), and the step
 uses centered ranks in [-0.5, 0.5], then standardised ("rank_std").
 
 ``SHAPINGS`` is the one registry of shapings (``--shaping``):
 
-    rank_std  the original: centered ranks, then standardised (x 3.447 at N = 200, spec §2.1 step 4)
-    rank      OpenAI es-starter's ``centered_rank`` (spec §2.5): the centered ranks alone
+    rank_std  the original: centered ranks, then standardised (x 3.447 at N = 200; docs/original.md, "The
+              evolution strategy")
+    rank      OpenAI es-starter's ``centered_rank`` (the same page): the centered ranks alone
     none      the fitness itself, standardised (non-finite fitness counts as the lowest finite one)
-    nes       pytorch-es's NES utilities (Wierstra et al. 2014; spec §7.4, log-base fix included), ``es.nes``
+    nes       pytorch-es's NES utilities (Wierstra et al. 2014; docs/original.md, "pytorch-es"; the log-base fix
+              included), ``es.nes``
 
 Each returns None when every member is equal: there is no direction to step in.
 """

@@ -2,7 +2,7 @@
 
 The interface (``Strategy``, in the style of evosax): ``initial_state(theta)``; ``ask(state, rng,
 noise)`` returns the generation's ``Population`` -- a noise index and a sign per member (the wire
-protocol of DESIGN.md), and what the workers need beside theta: a per-parameter sigma (``scale``)
+protocol of docs/how-it-works.md), and what the workers need beside theta: a per-parameter sigma (``scale``)
 or, for a strategy that cannot draw from the noise table, the members' vectors (``rows``), both
 published once per generation as theta is; ``tell(state, noise, population, fitness)`` returns the
 new ``ESState`` and a dict of metrics (``update_factor``, ``skipped``). A strategy's own arrays live
@@ -12,7 +12,7 @@ The registry of strategies is ``es.strategies.STRATEGIES``.
 OpenAI-ES with mirrored sampling:
 
 Salimans et al. 2017 ("Evolution Strategies as a Scalable Alternative to Reinforcement Learning"),
-Algorithm 2, as adapted by Najarro & Risi 2020 (upstream spec §2.1):
+Algorithm 2, as adapted by Najarro & Risi 2020 (docs/original.md, "The evolution strategy"):
 
 - mirrored sampling: members 2p and 2p+1 are theta + sigma*eps_p and theta - sigma*eps_p;
 - fitness shaping (``es.shaping``), injected: by default centered ranks, then standardised;

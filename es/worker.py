@@ -1,10 +1,10 @@
 """What a worker does with a task: rebuild the member's parameters from the noise table, run the episode.
 
-The wire protocol (DESIGN.md) is the same for every backend. Per generation the runner publishes
-theta, sigma and, with ``--obs_norm``, the observation statistics (mean, std) once; a task is then
-one record of ``TASK_DTYPE``
+The wire protocol (docs/how-it-works.md, "The worker protocol") is the same for every backend. Per
+generation the runner publishes theta, sigma and, with ``--obs_norm``, the observation statistics (mean,
+std) once; a task is then one record of ``TASK_DTYPE``
 
-    (member, noise_index, sign, env_index, seed, record_obs)
+    (member, noise_index, sign, env_index, seed, record_obs, max_steps)
 
 and its outcome ``("result", (return, env steps, L2 penalty, observation sums))`` or
 ``("error", message)``. ``noise_index < 0`` is the unperturbed centre, theta itself; otherwise the

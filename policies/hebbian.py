@@ -4,7 +4,7 @@ The flat parameter vector has up to three named parts:
 
 - ``coefficients`` (n_synapses, k): one row of k rule coefficients per synapse. Row
   ``layer_offset + i * n_out + j`` belongs to the synapse from pre-synaptic unit i to post-synaptic
-  unit j, as in the original code (upstream spec §3.3), so original coefficient files load.
+  unit j, as in the original code (docs/original.md, "Networks"), so original coefficient files load.
 - ``cnn`` (1362 for RGB, 1416 for a stack of 4 frames): the conv weights of a pixel network.
   Evolved, never plastic.
 - ``initial_weights``: with ``--init_weights coevolve``, the weights each episode starts from
@@ -79,7 +79,8 @@ class HebbianPolicy(Policy):
         self.roles = ("coeffs",) + tuple(ROLES[name] for name, _ in parts[1:])
 
     def initial_params(self, rng: np.random.Generator) -> np.ndarray:
-        """Generation-0 vector: N(0, 1) or U(-1, 1) for every part, as the original (spec §4.5)."""
+        """Generation-0 vector: N(0, 1) or U(-1, 1) for every part, as the original (docs/original.md,
+        "Initial weights")."""
         if self.distribution == "normal":
             return rng.standard_normal(self.num_params, dtype=np.float32)
         return rng.uniform(-1.0, 1.0, self.num_params).astype(np.float32)
@@ -155,6 +156,6 @@ class HebbianPolicy(Policy):
         return np.concatenate(blocks)
 
     def file_name(self, role: str, env: str, reward: int | str, population: int, generation: int) -> str:
-        """The original Hebbian code's name (upstream spec §6)."""
+        """The original Hebbian code's name (docs/original.md, "Files")."""
         return (f"HEBcoeffs__{env}__rew_{reward}__{self.rule.name}__init_{self.init_weights}__pop_{population}"
                 f"__{role}__{generation}.dat")

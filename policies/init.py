@@ -1,4 +1,4 @@
-"""Initial weight distributions (upstream spec §3.5 and §4.4), drawn with numpy from an explicit rng.
+"""Initial weight distributions (docs/original.md, "Initial weights"), drawn with numpy from an explicit rng.
 
 ``default_bound`` is PyTorch's default initialisation of Linear and Conv2d weights,
 U(-1/sqrt(fan_in), 1/sqrt(fan_in)), which the static networks start from. ``INIT_WEIGHTS`` maps

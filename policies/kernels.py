@@ -1,14 +1,14 @@
 """Compiled per-step kernels: the dense three-layer head, static and Hebbian.
 
 Every network of the project ends in the same head, in -> 128 -> 64 -> out without biases
-(Najarro & Risi 2020, §3.1 of the upstream spec). One call per environment step runs the whole
+(Najarro & Risi 2020; docs/original.md, "Networks"). One call per environment step runs the whole
 head, so the interpreter is crossed once per step instead of a dozen times.
 
 Layout. Each layer is stored transposed, as W^T with shape (n_in, n_out), C-order, the three
 layers one after the other in one flat float32 array. The forward pass is then a sum of rows
 (``post += pre[i] * W^T[i]``) and the Hebbian update a loop over rows, both contiguous in the
 inner loop, which the compiler vectorises. It is also the original coefficient layout: the
-coefficients of synapse (pre i, post j) are row ``layer_offset + i * n_out + j`` (spec §3.3),
+coefficients of synapse (pre i, post j) are row ``layer_offset + i * n_out + j`` (docs/original.md, "Networks"),
 the same position as the weight.
 
 The Hebbian update is evaluated in a folded form. Every rule of the paper is an instance of
@@ -18,7 +18,7 @@ d = eta D_in + D_out (see ``policies.rules``). The folding happens once per epis
 reads four coefficients per synapse whatever the rule: per layer, four planes (a, b, c, d) of
 shape (n_in, n_out), stored one layer after the other.
 
-Weight normalisation (each layer divided by its largest |w| after every update, spec §4.3) is
+Weight normalisation (each layer divided by its largest |w| after every update, docs/original.md, "Hebbian rules") is
 kept lazy: a layer's stored weights times ``scale[layer]`` are its true weights, so the division
 is folded into the next step's pass over the layer. A layer whose weights are all zero is left as
 it is instead of turning into NaN.

@@ -1,4 +1,4 @@
-"""Network shapes shared by the static and the Hebbian policies (upstream spec §3.1-3.3).
+"""Network shapes shared by the static and the Hebbian policies (docs/original.md, "Networks").
 
 State vectors go through an MLP  obs -> 128 -> 64 -> actions; pixels (C x 84 x 84: 3 for the
 original's RGB frames, 4 for an Atari frame stack) first through two conv layers whose 648 features

@@ -1,4 +1,5 @@
-"""pytorch-es's two networks (atgambardella/pytorch-es ``model.py``, upstream spec §7.2), as static policies.
+"""pytorch-es's two networks (atgambardella/pytorch-es ``model.py``; docs/original.md, "pytorch-es"), as static
+policies.
 
 Both use selu (Klambauer et al. 2017: scale 1.0507..., alpha 1.6732...), which pytorch-es chose
 instead of virtual batch norm, and biases everywhere; their weights are evolved directly, like the

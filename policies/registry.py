@@ -175,7 +175,7 @@ def preprocessing(settings: PolicySettings) -> str:
 
 def make_policy(settings: PolicySettings, net: NetworkSpec, normalise: bool = True) -> Policy:
     """The policy ``settings`` name, for a network ``net``; ``normalise``: the environment's Hebbian
-    weight normalisation (upstream spec §4.3), used by plastic kinds only. With ``reservoir`` the
+    weight normalisation (docs/original.md, "Hebbian rules"), used by plastic kinds only. With ``reservoir`` the
     network reads a reservoir's state (a ValueError for pixels, or without reservoirpy). With
     ``obs_norm`` a vector-input network sees normalised observations (through the reservoir, if any);
     a pixel network is left as it is. With ``fast_conv`` the CNN is the compiled pass (``policies.conv``;

@@ -1,6 +1,6 @@
 """The reservoir front end (``--reservoir``): an evolved head reads an echo state network's state.
 
-One step beyond ER-MRL (Léger et al. 2024, upstream spec §8): there a PPO agent learns on a
+One step beyond ER-MRL (Léger et al. 2024, docs/original.md, "ER-MRL"): there a PPO agent learns on a
 reservoir's state; here the head this tool evolves, static (Salimans et al. 2017) or Hebbian
 (Najarro & Risi 2020), reads it instead of the observation, so the three kinds of evolved prior
 (weights, plasticity rules, reservoirs) run on the same environments and the same protocol.

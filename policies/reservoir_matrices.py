@@ -3,7 +3,7 @@ spectral radius and input scaling are applied: what both the ES networks' reserv
 (``policies.reservoir``) and ER-MRL's own ``reservoirs.esn.EchoStateNetwork`` are built from.
 
 ER-MRL built ``reservoirpy.nodes.Reservoir(units, lr, sr, input_scaling, seed)`` with reservoirpy 0.3.9
-(upstream spec §8.1); the matrices are made here with reservoirpy 0.4's own ``mat_gen`` initialisers,
+(docs/original.md, "ER-MRL"); the matrices are made here with reservoirpy 0.4's own ``mat_gen`` initialisers,
 called as 0.3 called them (``reservoirs.esn`` says why).
 
 ``ReservoirMatrices`` holds the draws before the hyperparameters scale them: W as drawn with its

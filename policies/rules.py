@@ -4,8 +4,8 @@ Each rule is a choice of which terms of the general form
 
     dw_ij = eta * (A * o_i * o_j + B * o_i + C * o_j + D_in) + D_out
 
-it evolves, and in which column of the per-synapse coefficient row each term lives (upstream spec
-§4.1). Terms a rule does not evolve are 0, and eta is 1. ``o_i`` is the pre-synaptic activity, ``o_j``
+it evolves, and in which column of the per-synapse coefficient row each term lives (docs/original.md,
+"Hebbian rules"). Terms a rule does not evolve are 0, and eta is 1. ``o_i`` is the pre-synaptic activity, ``o_j``
 the post-synaptic one. The column order is the original's, so coefficient files written by the
 original code load unchanged:
 

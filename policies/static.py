@@ -55,7 +55,7 @@ class WeightFile(Policy):
         return check_length("the weight file", arrays["weights"], self.num_params, "this network")
 
     def file_name(self, role: str, env: str, reward: int | str, population: int, generation: int) -> str:
-        """The original ES code's name (upstream spec §6); a role a front end adds (``policies.reservoir``)
+        """The original ES code's name (docs/original.md, "Files"); a role a front end adds (``policies.reservoir``)
         is named before the generation, as the Hebbian files name theirs."""
         if role == "weights":
             return f"{env}__rew_{reward}__pop_{population}__{generation}.dat"

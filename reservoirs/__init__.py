@@ -3,7 +3,7 @@ Moulin-Frier, EvoApplications 2024, arXiv 2312.06695), on maintained libraries.
 
 An outer loop (optuna) evolves the hyperparameters of random recurrent networks, reservoirs; an inner
 loop trains a PPO agent (stable-baselines3) from scratch on the reservoir's state instead of the
-observation. Upstream spec §8 and §9.3 describe the original; docs/reservoirs.md
+observation. docs/original.md ("ER-MRL") describes the original; docs/reservoirs.md
 says what changed.
 
     esn.py          the echo state network: reservoirpy 0.4 with reservoirpy 0.3's semantics (reset / step

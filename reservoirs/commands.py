@@ -1,6 +1,6 @@
 """The six ER-MRL scripts of ``scripts/``, with the original's names, flags, study names and output
-folders (upstream spec §8.2), and what this tool adds: one-line errors with exit code 2, seeds,
-recorded settings, and the fixes of spec §9.3.
+folders (docs/original.md, "ER-MRL"), and what this tool adds: one-line errors with exit code 2, seeds,
+recorded settings, and the fixes of docs/original.md, "ER-MRL".
 
 - evolve_res.py, evolve_multi_res.py, evolve_generalization.py: run ``--nb_trials`` more trials of the
   study ``optuna-journal_<name>.log`` in the current folder (created, or continued).

@@ -1,7 +1,7 @@
 """The echo state network of ER-MRL: reservoirpy 0.4's ``Reservoir`` with reservoirpy 0.3's semantics.
 
 ER-MRL (Léger et al. 2024) built ``reservoirpy.nodes.Reservoir(units, lr, sr, input_scaling, seed)``
-with reservoirpy 0.3.9 (upstream spec §8.1). With all other arguments at 0.3's defaults that is the
+with reservoirpy 0.3.9 (docs/original.md, "ER-MRL"). With all other arguments at 0.3's defaults that is the
 leaky integrator (0.3's "internal" equation, without noise)
 
     x[t+1] = (1 - lr) * x[t] + lr * tanh(W_in u[t+1] + W x[t] + b)

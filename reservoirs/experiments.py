@@ -1,4 +1,4 @@
-"""What ER-MRL evolves and how it scores generalisation (upstream spec §8.1, §8.2; ER-MRL's
+"""What ER-MRL evolves and how it scores generalisation (docs/original.md, "ER-MRL"; ER-MRL's
 ``er_mrl/experiments.py``): the search space, the environment presets, the target and random returns,
 and the normalised score (R - R_random) / (R_target - R_random).
 
@@ -36,7 +36,7 @@ TARGET_RETURN: dict[str, float] = {
 }
 
 # The original's R_random (env_random_reward): the mean *per-step* reward of a random agent, which it
-# compared with episodic returns (spec §9.3.5). Kept for --random_baseline per_step.
+# compared with episodic returns (docs/original.md, "ER-MRL"). Kept for --random_baseline per_step.
 RANDOM_RETURN_PER_STEP: dict[str, float] = {
     "Ant-v4": -0.355, "HalfCheetah-v4": -0.292, "Hopper-v4": 0.751, "Humanoid-v4": 5.025,
     "HumanoidStandup-v4": 33.089, "InvertedDoublePendulum-v4": 9.088, "InvertedPendulum-v4": 1.0,

@@ -1,6 +1,6 @@
 """The outer loop's bookkeeping on optuna: samplers, the journal file, study names, recorded settings.
 
-As in ER-MRL (upstream spec §8.2), a study lives in ``optuna-journal_<name>.log`` in the current
+As in ER-MRL (docs/original.md, "ER-MRL"), a study lives in ``optuna-journal_<name>.log`` in the current
 folder and is loaded if it exists, so running an evolve script again adds trials to it, and several
 processes, on one machine or on machines sharing the folder, can run trials of one study at once
 (the original's SLURM arrays: 90 jobs of 10 trials on one journal). The journal is written through

@@ -1,4 +1,4 @@
-"""The inner loop of ER-MRL (upstream spec §8.1): a PPO agent trained from scratch on the reservoir's
+"""The inner loop of ER-MRL (docs/original.md, "ER-MRL"): a PPO agent trained from scratch on the reservoir's
 state, and the fitness of a trial's reservoirs.
 
 PPO is stable-baselines3's ``PPO('MlpPolicy')`` with SB3's defaults, as the original (learning rate

@@ -1,4 +1,4 @@
-"""The Gymnasium wrappers of ER-MRL (Léger et al. 2024; upstream spec §8.1), one concern each.
+"""The Gymnasium wrappers of ER-MRL (Léger et al. 2024; docs/original.md, "ER-MRL"), one concern each.
 
 - ``ReservoirWrapper``: the agent sees a reservoir's state (the "context") instead of the observation;
   with ``skip_c`` the reservoir's input is appended to it.
@@ -9,7 +9,7 @@
 
 The reservoir's input at every step is (observation, previous action, reward), the action one-hot for
 a Discrete action space (``TransitionEncoder``). The original always fed a zero action, or one-hot(0),
-because ``step`` overwrote its ``action`` variable before using it (spec §9.3.1); here the action is
+because ``step`` overwrote its ``action`` variable before using it (docs/original.md, "ER-MRL"); here the action is
 the one the environment received, and ``zero_action=True`` reproduces the published behaviour. After
 a reset there is no previous action: the input holds zeros there (the original's one-hot(0) for a
 Discrete space with ``zero_action``). Every reservoir is reset to zero at every episode.

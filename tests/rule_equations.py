@@ -1,4 +1,5 @@
-"""The nine Hebbian rules of Najarro & Risi (2020), written out from the spec's table (§4.1).
+"""The nine Hebbian rules of Najarro & Risi (2020), written out from the table of docs/original.md,
+"Hebbian rules".
 
 Shared by the rule and policy tests as the reference the fast code is checked against.
 """

@@ -2,7 +2,7 @@
 
 - without ale-py an Atari id ends in one line naming the install (exit code 2): run always, with
   ale-py hidden from a subprocess;
-- the FIRE reset (upstream spec §5) on a scripted stub: presses after reset and after a lost life,
+- the FIRE reset (docs/original.md, "Episodes") on a scripted stub: presses after reset and after a lost life,
   their rewards dropped, a game that ends during the presses;
 - with ale-py (skipped only where it is absent; CI installs it): the three Pong ids of the issue make
   the same pipeline; an agent step is 4 frames whatever the id (frames never skipped twice); FIRE is

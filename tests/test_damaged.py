@@ -1,11 +1,11 @@
-"""The damaged ants of Najarro & Risi (2020) (envs/damaged.py, upstream spec §5.4) and fitness over
+"""The damaged ants of Najarro & Risi (2020) (envs/damaged.py, docs/original.md, "The damaged ants") and fitness over
 several bodies.
 
 - each damaged file is the packaged model (pyBullet's pybullet_data/mjcf/ant.xml, Gymnasium's
-  mujoco/assets/ant.xml) with exactly the one ``fromto`` line of spec §5.4 changed;
+  mujoco/assets/ant.xml) with exactly the one ``fromto`` line of docs/original.md, "The damaged ants" changed;
 - the registered ids make, reset and step, and the pyBullet ones get the whole pyBullet-ant recipe;
 - the damaged foot really is shorter once loaded: pyBullet ``getAABB`` (``getCollisionShapeData``
-  segfaults on these MJCF links, environment-notes §4) and the MuJoCo model's capsule size;
+  segfaults on these MJCF links in pyBullet 3.2.7) and the MuJoCo model's capsule size;
 - a problem over several environments evaluates each exactly as a problem over that one alone, so
   the fitness of the paper's protocol is the mean of the single-body fitnesses (on two bodies that
   score differently, so that each must have run).
@@ -44,7 +44,8 @@ def test_each_file_changes_one_line_of_the_packaged_ant(engine, side):
 
 
 def test_bullet_files_match_the_originals_size():
-    # the original repository's files are 4,233 bytes each, as pyBullet 3.2.7's ant.xml (spec §5.4)
+    # the original repository's files are 4,233 bytes each, as pyBullet 3.2.7's ant.xml (docs/original.md,
+    # "The damaged ants")
     assert [damaged.bullet_xml(side).stat().st_size for side in ("left", "right")] == [4233, 4233]
 
 

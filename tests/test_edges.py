@@ -233,7 +233,7 @@ def test_importing_envs_sets_no_mujoco_backend():
 
 
 def test_a_gl_backend_that_cannot_load_is_one_line_naming_what_to_install(tmp_path):
-    """OSMesa is not installed here (environment notes §8): MUJOCO_GL=osmesa cannot even import MuJoCo."""
+    """OSMesa is not installed here: MUJOCO_GL=osmesa cannot even import MuJoCo."""
     from envs.headless import loads
 
     if loads(("libOSMesa.so.8", "libOSMesa.so.6", "libOSMesa.so")):

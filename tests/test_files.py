@@ -1,7 +1,7 @@
 """Run files (es/files.py, es/runfolder.py, the policies' file names): the original ``.dat`` format and names,
 safe loading, atomic writes.
 
-A ``.dat`` file is a float32 numpy array saved with ``torch.save`` (upstream spec §6). The original
+A ``.dat`` file is a float32 numpy array saved with ``torch.save`` (docs/original.md, "Files"). The original
 files were written with numpy 1, whose pickles name ``numpy.core.multiarray._reconstruct``; they
 must load under numpy 2, while a pickle that would run code must be refused without running it.
 """
@@ -215,7 +215,7 @@ def test_failed_atomic_write_keeps_the_old_file(tmp_path):
     assert os.listdir(tmp_path) == ["metrics.csv"]
 
 
-# --- the original names (spec §6) ----------------------------------------------------------------
+# --- the original names (docs/original.md, "Files") ----------------------------------------------------------------
 
 
 def test_atomic_write_never_replaces_a_folder(tmp_path):

@@ -1,12 +1,13 @@
-"""Static and Hebbian policies (policies/) against references written from upstream spec §3-4.
+"""Static and Hebbian policies (policies/) against references written from docs/original.md ("Networks",
+"Initial weights" and "Hebbian rules").
 
-- the fused numba Hebbian kernel, step by step, against a numpy reference of spec §4.1-4.3
+- the fused numba Hebbian kernel, step by step, against a numpy reference of docs/original.md, "Hebbian rules"
   (act with the current weights, update each layer from its own pre/post activities, normalise);
 - a Hebbian net with zero coefficients acts exactly like the static net on the same weights;
 - the static flat vector is PyTorch's ``parameters_to_vector`` order of the original modules (MLP and
   CNN), checked against a torch forward pass; the CNN's pooling is torch's, bit for bit;
-- the ``--init_weights`` distributions of spec §4.4, per-episode reproducibility;
-- the parameter counts of spec §3.2, the named layout, and export/load in the original shapes.
+- the ``--init_weights`` distributions of docs/original.md, "Initial weights", per-episode reproducibility;
+- the parameter counts of docs/original.md, "Networks", the named layout, and export/load in the original shapes.
 """
 
 import math
@@ -30,7 +31,8 @@ CAR = PIXELS
 ANT = NetworkSpec((28,), 8)
 
 def reference_episode(rule, coeffs, weights, observations, squash_out, normalise):
-    """Spec §4.2-4.3 in float64: act, then update every layer, then divide each by its max |w|.
+    """The original's step (docs/original.md, "Hebbian rules") in float64: act, then update every layer, then
+    divide each by its max |w|.
 
     ``coeffs`` is (n_synapses, k) with row offset + i * n_out + j for the synapse i -> j of a layer;
     ``weights`` the (n_out, n_in) layers, updated in place. Returns the output of every step.
@@ -89,7 +91,7 @@ def test_hebbian_kernel_matches_the_reference(rule, squash_out, normalise):
 
 
 def test_first_action_uses_the_initial_weights():
-    # The update comes after acting (spec §4.2): step 0 sees the episode's initial weights only.
+    # The update comes after acting (docs/original.md, "Hebbian rules"): step 0 sees the episode's initial weights only.
     policy = HebbianPolicy(MLP, rule="ABCD_lr", init_weights="uni")
     params = np.random.default_rng(0).standard_normal(policy.num_params).astype(np.float32)
     state = policy.reset(params, episode_rng(3))
@@ -123,7 +125,7 @@ def test_zero_coefficients_act_exactly_like_the_static_net(net):
 
 
 class TorchMLP(nn.Module):
-    """The original MLP (spec §3.1): no biases, tanh hidden layers, raw or tanh output."""
+    """The original MLP (docs/original.md, "Networks"): no biases, tanh hidden layers, raw or tanh output."""
 
     def __init__(self, n_in, n_actions, squash_out):
         super().__init__()
@@ -138,7 +140,7 @@ class TorchMLP(nn.Module):
 
 
 class TorchCNN(nn.Module):
-    """The original CNN (spec §3.1): one pool module used twice, flatten with view(-1)."""
+    """The original CNN (docs/original.md, "Networks"): one pool module used twice, flatten with view(-1)."""
 
     def __init__(self, n_actions):
         super().__init__()
@@ -232,7 +234,7 @@ def test_default_cnn_features_are_torchs_layers_to_float32_rounding(channels):
         first = got if first is None else first
         assert got is first and np.abs(got - expected.numpy()).max() < 1e-5
 
-# --- (d) --init_weights distributions (spec §4.4) --------------------------------------------------
+# --- (d) --init_weights distributions (docs/original.md, "Initial weights") ----------------------------------
 
 # (kind, parameter) of each distribution for a layer with the given fan-in and fan-out.
 SPEC_INIT = {
@@ -254,7 +256,7 @@ def test_every_init_choice_is_specified():
 
 
 def test_spec_bounds_for_ant_and_car_first_layers():
-    # The numbers quoted in spec §3.5 and §4.4 (Ant fc1: 28 -> 128; Car linear1: 648 -> 128).
+    # The numbers quoted in docs/original.md, "Initial weights" (Ant fc1: 28 -> 128; Car linear1: 648 -> 128).
     assert SPEC_INIT["xa_uni"](28, 128)[1] == pytest.approx(0.0588, abs=1e-4)
     assert SPEC_INIT["xa_uni"](648, 128)[1] == pytest.approx(0.0264, abs=1e-4)
     assert SPEC_INIT["xa_uni_big"](28, 128)[1] == pytest.approx(0.196, abs=1e-3)
@@ -306,7 +308,7 @@ def test_init_weights_reproducible_per_episode_seed(name):
         assert not np.array_equal(first_layer(5), first_layer(6))
 
 
-# --- (e) parameter counts and layout (spec §3.2) -------------------------------------------------
+# --- (e) parameter counts and layout (docs/original.md, "Networks") ------------------------------------------
 
 
 def test_static_parameter_counts():

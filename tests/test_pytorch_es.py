@@ -1,12 +1,13 @@
-"""pytorch-es's networks, preprocessing and NES utilities, against references written from upstream spec §7.
+"""pytorch-es's networks, preprocessing and NES utilities, against references written from docs/original.md
+("pytorch-es").
 
-- the small net and the conv-LSTM against plain torch ``nn.Module`` forwards written from spec §7.2,
+- the small net and the conv-LSTM against plain torch ``nn.Module`` forwards written from that page,
   loaded from our flat vector in ``state_dict`` order, step by step (the LSTM state carried by
   ``act``, zeroed by ``reset``); their parameter counts (4 610 on CartPole, 588 710 on Pong);
 - their refusals (the small net on images, the conv-LSTM on vectors), in one line;
-- the 42 x 42 frame and the running normalisation against a transcription of spec §7.3, and the
+- the 42 x 42 frame and the running normalisation against a transcription of docs/original.md, "pytorch-es", and the
   normalisation restarting at every reset;
-- the NES utilities (spec §7.4) against the original's loop, and exact values;
+- the NES utilities (docs/original.md, "pytorch-es") against the original's loop, and exact values;
 - the default CNN on a 4-frame stack against a torch forward (the RGB path is pinned elsewhere).
 """
 
@@ -38,7 +39,7 @@ def selu(x):
 
 
 class TorchSmallNet(nn.Module):
-    """Spec §7.2's small net."""
+    """pytorch-es's small net (docs/original.md, "pytorch-es")."""
 
     def __init__(self, n_in, n_actions):
         super().__init__()
@@ -51,7 +52,8 @@ class TorchSmallNet(nn.Module):
 
 
 class TorchConvLSTM(nn.Module):
-    """Spec §7.2's big net: four stride-2 convs with selu, LSTMCell(288, 256), a linear head."""
+    """pytorch-es's big net (docs/original.md, "pytorch-es"): four stride-2 convs with selu, LSTMCell(288,
+    256), a linear head."""
 
     def __init__(self, channels, n_actions):
         super().__init__()
@@ -191,7 +193,7 @@ class Screens(gym.Env):
 
 
 def process_frame42(frame):
-    """Spec §7.3 (pytorch-es's ``_process_frame42``)."""
+    """pytorch-es's ``_process_frame42`` (docs/original.md, "pytorch-es")."""
     frame = frame[34:34 + 160, :160]
     frame = cv2.resize(cv2.resize(frame, (80, 80)), (42, 42))
     frame = frame.mean(2).astype(np.float32)
@@ -225,7 +227,7 @@ def test_running_normalisation_is_the_spec_and_restarts_every_episode():
 
 
 def pytorch_es_shaping(returns):
-    """pytorch-es's ``fitness_shaping`` after PR #8, transcribed (spec §7.4)."""
+    """pytorch-es's ``fitness_shaping`` after PR #8, transcribed (docs/original.md, "pytorch-es")."""
     sorted_returns_backwards = sorted(returns)[::-1]
     lamb = len(returns)
     denom = sum(max(0, math.log(lamb / 2 + 1, 2) - math.log(sorted_returns_backwards.index(r) + 1, 2))

@@ -1,6 +1,6 @@
 """Per-family environment recipes (envs/recipes.py) and their wrappers (envs/wrappers.py).
 
-The original code chose each quirk by exact id inside its episode loop (upstream spec §5.1-5.3):
+The original code chose each quirk by exact id inside its episode loop (docs/original.md, "Episodes"):
 argmax for Discrete actions, clipping for Box, [tanh, sigmoid, sigmoid] and a stop on the 21st
 consecutive negative reward for CarRacing, and for the pyBullet ant a tanh output, a 40-step
 zero-action burn-in, the progress reward ``rewards[1]``, termination ignored for the first 201

@@ -161,7 +161,7 @@ def test_context_lies_in_its_space():
 
 
 def test_skip_connection_bounds_use_max():
-    """The original took min(observation_space.high) for a Discrete action space (spec §9.3.3)."""
+    """The original took min(observation_space.high) for a Discrete action space (docs/original.md, "ER-MRL")."""
     discrete = ReservoirWrapper(gym.make("CartPole-v1"), SETTINGS, skip_c=True)
     cartpole = gym.make("CartPole-v1").observation_space
     assert discrete.observation_space.high[0] == np.float64(np.max(cartpole.high))

@@ -1,4 +1,4 @@
-"""The nine Hebbian rules (policies/rules.py) against the equations of upstream spec §4.1.
+"""The nine Hebbian rules (policies/rules.py) against the equations of docs/original.md, "Hebbian rules".
 
 Each rule's folded form (a o_j + b) o_i + c o_j + d, the factors the compiled Hebbian kernel reads
 (``Rule.fold``), is compared with a plain per-synapse loop that reads coefficient row

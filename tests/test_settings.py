@@ -225,7 +225,7 @@ def test_help_shows_each_flag_once_with_its_default_once(script, capsys):
 
 
 def test_the_original_flags_are_all_there():
-    """Upstream spec §1: every flag of the four original scripts, and pytorch-es's --useAdam."""
+    """Every flag (docs/original.md, "Command lines") of the four original scripts, and pytorch-es's --useAdam."""
     original = {
         train_hebb: ["--environment", "--hebb_rule", "--popsize", "--lr", "--decay", "--sigma", "--init_weights",
                      "--print_every", "--generations", "--threads", "--folder", "--distribution"],

@@ -1,7 +1,7 @@
 """The evolution strategy (es/strategy.py, es/shaping.py, es/optimizers.py) and its noise table (es/noise.py).
 
 Exact values where the math is exact: centered ranks, standardisation, the lr and sigma schedules
-of upstream spec §2.1 (steps 4-7), and one SGD step of OpenAI-ES (Salimans et al. 2017) written out
+of docs/original.md, "The evolution strategy", and one SGD step of OpenAI-ES (Salimans et al. 2017) written out
 by hand on a four-number noise table.
 """
 
@@ -75,8 +75,9 @@ def test_shape_fitness_is_none_when_every_value_is_equal():
     assert shape_fitness(np.full(10, -3.0)) is None
 
 
-def test_shape_fitness_rescales_ranks_by_the_constant_of_the_spec():
-    # Spec §2.1: with n = 200 distinct values, std of the ranks is sqrt((n+1)/(12(n-1))) = 0.2901.
+def test_shape_fitness_rescales_ranks_by_the_originals_constant():
+    # docs/original.md, "The evolution strategy": with n = 200 distinct values, std of the ranks is
+    # sqrt((n+1)/(12(n-1))) = 0.2901.
     fitness = np.random.default_rng(1).normal(size=200)
     shaped = shape_fitness(fitness)
     factor = 1 / math.sqrt(201 / (12 * 199))
@@ -112,7 +113,7 @@ def test_schedules_after_300_and_1000_generations():
     lr, sigma = run_schedules(300)
     assert lr == pytest.approx(0.2 * 0.995 ** 300, rel=1e-12)
     assert sigma == pytest.approx(0.1 * 0.999 ** 300, rel=1e-12)
-    assert (round(lr, 5), round(sigma, 5)) == (0.04446, 0.07407)  # spec §2.1 step 7
+    assert (round(lr, 5), round(sigma, 5)) == (0.04446, 0.07407)  # docs/original.md, "The evolution strategy"
     lr, sigma = run_schedules(1000)
     assert (round(lr, 5), round(sigma, 5)) == (0.00133, 0.03677)
 

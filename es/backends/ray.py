@@ -2,7 +2,7 @@
 
 Salimans et al. (2017) scaled ES to 1 440 cores by sending only seeds and returns. Ray Core
 (Moritz et al., OSDI 2018) does the sending here, on one machine or many, with the protocol of
-DESIGN.md unchanged:
+docs/how-it-works.md ("The worker protocol") unchanged:
 
 - one long-lived actor per CPU (or per ``--threads``), each holding a ``Worker``: its environments
   are made once per run;
