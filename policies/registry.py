@@ -76,9 +76,9 @@ class PolicySettings:
                                      evaluation=True, group=MODERN, shown_default="no clip",
                                      help="clip normalised observations to +-C (OpenAI: 5)")
     fast_conv: bool = setting(False, scripts=EVALUATED, evaluation=True, group=MODERN,
-                              help="pixel networks (the default CNN) only: the CNN as one compiled pass, about 4x "
-                                   "faster per frame, equal to the torch path up to float32 rounding (about 1e-5), "
-                                   "not bit for bit (docs/speed-carracing.md)")
+                              help="pixel networks (the default CNN) only: the CNN as one compiled pass with its own "
+                                   "summation order, equal to the default's up to float32 rounding (about 1e-5), not "
+                                   "bit for bit (docs/speed-carracing.md)")
     reservoir: bool = setting(False, scripts=EVALUATED, evaluation=True, group=RESERVOIR,
                               help="the network reads the state of a random reservoir (ER-MRL's leaky echo state "
                                    "network, reset every episode) that reads the observation; not for pixels; needs "

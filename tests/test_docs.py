@@ -533,8 +533,8 @@ def test_figures_are_their_records():
 
 # a measured speed typed into a page: 9.3×, 505 µs, 4.3 ms per step, 651 steps/s, 2.0 h on 16 workers (a target is
 # written "≥ 8×"; "84×84" and "4 × CPUs" are sizes and products)
-TYPED_SPEED = re.compile(r"(?<![\d.,])(?<![≥≤<>])(?<![≥≤<>] )\d[\d,]*(?:\.\d+)?(?:×(?![\d·])|\s?µs\b|\s?ms per\b"
-                         r"|\s?steps/s\b|\s?h on \d+ workers)")
+TYPED_SPEED = re.compile(r"(?<![\d.,])(?<![≥≤<>])(?<![≥≤<>] )\d[\d,]*(?:\.\d+)?(?:×(?![\d·])|x (?:faster|slower)\b"
+                         r"|\s?µs\b|\s?ms per\b|\s?steps/s\b|\s?h on \d+ workers)")
 
 
 def test_no_speed_figure_is_typed_into_a_page():
