@@ -6,9 +6,9 @@ std) once; a task is then one record of ``TASK_DTYPE``
 
     (member, noise_index, sign, env_index, seed, record_obs, max_steps)
 
-and its outcome ``("result", (return, env steps, L2 penalty, observation sums))`` or
-``("error", message)``. ``noise_index < 0`` is the unperturbed centre, theta itself; otherwise the
-member is theta + sign * sigma * noise[noise_index : noise_index + dim]. Two strategies need more,
+and its outcome ``("result", (return, env steps, L2 penalty, observation sums))``, ``("error", message)``
+or ``("nonfinite", (generation, what, message))``. ``noise_index < 0`` is the unperturbed centre, theta
+itself; otherwise the member is theta + sign * sigma * noise[noise_index : noise_index + dim]. Two strategies need more,
 published once per generation beside theta through the same path (``es.backends``: shared memory,
 Ray's object store), never per task: a per-parameter sigma (``scale``: PGPE, SNES), which replaces
 the scalar sigma, and the members' own vectors (``rows``: CMA-ES, whose samples cannot come from
