@@ -21,8 +21,8 @@ what it does, and nothing outside asks a policy anything else (no ``getattr`` pr
   ``describe_front_ends``;
 - **add metrics columns**: ``metrics_columns`` names them, ``evolved_values`` gives their values for
   a parameter vector (the reservoir's evolved hyperparameters); ``es.files`` writes them;
-- **import heavy modules in its episodes**: ``worker_modules`` names them (torch, for the
-  convolutional front end), for the process pool to load once before its workers start.
+- **import heavy modules in its episodes**: ``worker_modules`` names them, for the process pool to
+  load once before its workers start (no built-in policy needs it: the CNN does not use torch).
 
 Concrete policies subclass ``Policy`` to inherit the defaults (PEP 544 allows a protocol with default
 members to be subclassed explicitly).

@@ -1,5 +1,6 @@
-"""The process pool's fork server loads what a pixel policy's episodes import (torch) once, before it
-forks the workers, so that they share those pages instead of each loading its own copy.
+"""The process pool's fork server loads the heavy modules a policy's episodes import (its ``worker_modules``)
+once, before it forks the workers, so that they share those pages instead of each loading its own copy.
+No built-in policy names any since the CNN stopped using torch: a pixel policy's workers load no torch.
 
 Each case runs in a fresh interpreter: a process starts one fork server, with the modules of the
 first pool it makes, so a pytest process that made a pool already could not show it.
@@ -30,6 +31,7 @@ POOL = textwrap.dedent("""
 
     spec = ProblemSpec((sys.argv[1],), PolicySettings(kind=sys.argv[2]))
     problem = spec.build()
+    problem.policy.worker_modules = tuple(sys.argv[3:])  # a policy that names heavy modules
     dim = problem.policy.num_params
     noise = NoiseTable.create(1, dim + 10, shared=True)
     evaluator = make_evaluator(RunSettings(threads=2, backend="process"), spec.build, noise, dim, spec.env_ids, problem)
@@ -54,28 +56,26 @@ POOL = textwrap.dedent("""
 """)
 
 
-def pool_processes(env_id: str, kind: str) -> str:
-    result = subprocess.run([sys.executable, "-c", POOL, env_id, kind], cwd=ROOT, capture_output=True, text=True,
-                            timeout=300, env={"PYTHONPATH": str(ROOT), "SDL_VIDEODRIVER": "dummy",
+def pool_processes(env_id: str, kind: str, *modules: str) -> str:
+    result = subprocess.run([sys.executable, "-c", POOL, env_id, kind, *modules], cwd=ROOT, capture_output=True,
+                            text=True, timeout=300, env={"PYTHONPATH": str(ROOT), "SDL_VIDEODRIVER": "dummy",
                                               "PATH": "/usr/bin:/bin"})
     assert result.returncode == 0, result.stderr
     return result.stdout.strip()
 
 
 @pytest.mark.parametrize("kind", ["static", "hebbian"])
-def test_pixel_policies_name_torch_and_state_policies_nothing(kind):
-    assert ProblemSpec(("CarRacing-v3",), PolicySettings(kind=kind)).build().policy.worker_modules == ("torch",)
-    assert ProblemSpec(("CartPole-v1",), PolicySettings(kind=kind)).build().policy.worker_modules == ()
+def test_no_built_in_policy_names_worker_modules(kind):
+    for env_id in ("CarRacing-v3", "CartPole-v1"):
+        assert ProblemSpec((env_id,), PolicySettings(kind=kind)).build().policy.worker_modules == ()
     normalised = ProblemSpec(("CartPole-v1",), PolicySettings(kind=kind, obs_norm=True)).build().policy
     assert normalised.worker_modules == ()  # (a front end's are its inner policy's)
-    compiled = ProblemSpec(("CarRacing-v3",), PolicySettings(kind=kind, fast_conv=True)).build().policy
-    assert compiled.worker_modules == ()  # --fast_conv: the CNN without torch
 
 
-def test_the_fork_server_loads_torch_before_the_workers_of_a_pixel_policy():
+def test_the_fork_server_loads_a_policys_modules_before_the_workers():
     # one fork server, two workers forked from it; torch's libraries in all three
-    assert pool_processes("CarRacing-v3", "hebbian") == "1 2 True True"
+    assert pool_processes("CartPole-v1", "static", "torch") == "1 2 True True"
 
 
-def test_the_fork_server_loads_no_torch_for_a_state_policy():
-    assert pool_processes("CartPole-v1", "static") == "1 2 False False"
+def test_a_pixel_policys_workers_load_no_torch():
+    assert pool_processes("CarRacing-v3", "hebbian") == "1 2 False False"

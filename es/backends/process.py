@@ -6,7 +6,7 @@ receives only task records, in chunks (``es.backends.base``). A strategy's per-g
 generation into shared segments of their own (``SharedArrays``), made when first needed and remade
 only if an array outgrows its segment; a message names the segments, and a worker maps a segment
 once, by name. A worker that dies (segfault, out of memory) is replaced and the task it was running
-is retried once. Modules the episodes import that are heavy (``preload``: torch, for pixel policies)
+is retried once. Modules the episodes import that are heavy (``preload``: a policy's ``worker_modules``)
 are loaded by the fork server before it forks the workers, so that they share those pages: torch
 alone is about 120 MiB of private memory per process that imports it.
 """
