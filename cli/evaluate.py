@@ -37,7 +37,7 @@ from es.outputs import JSON_SUFFIXES
 from es.outputs import check_outputs as check_paths
 from es.runfolder import named_file
 from report.plots import FIGURE_SUFFIXES
-from report.video import VIDEO_SUFFIXES
+from report.video import STRIP_EVERY, VIDEO_SUFFIXES
 from settings import EPISODE_SEED_RANGE, SEED_RANGE, unmet_requirement
 
 COEV_ROLES = (  # --path_coev's
@@ -69,7 +69,8 @@ def evaluation_parser(prog: str, description: str, kind: str) -> Parser:
     add("--render", type=flag_value, nargs="?", const=True, default=False, metavar="BOOL",
         help="show the episodes in a window (needs a display)")
     add("--video", default=None, metavar="PATH",
-        help=f"write the first episode to this video file ({', '.join(VIDEO_SUFFIXES)}), frame by frame")
+        help=f"write the first episode to this video file ({', '.join(VIDEO_SUFFIXES)}), frame by frame; a "
+             f".png: a strip of every {STRIP_EVERY}th frame")
     add("--json", default=None, metavar="PATH",
         help="also write the statistics (per environment: returns, mean, std, steps, seeds; for ants "
              "the distances and forward displacements walked) to this JSON file")
