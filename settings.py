@@ -54,6 +54,12 @@ SEED_RANGE = (0, 2**31 - 1)  # every seed the project takes: numpy's and Gymnasi
 # from 2**31 on, which no training episode uses); Gymnasium seeds an episode from any of them
 EPISODE_SEED_RANGE = (0, 2**32 - 1)
 ANY = object()  # ``requires=("eval_every", ANY)``: any value but off (False, None)
+MODERN = "beyond the original algorithm (defaults: the original)"  # --help's group of the options the original lacks
+
+
+def optional_float(text: str) -> float | None:
+    """A flag's number, or ``none`` for no value."""
+    return None if text.strip().lower() == "none" else float(text)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -55,15 +55,6 @@ def resolve_environments(text: str) -> tuple[str, ...]:
     return tuple(envs.resolve_env_id(env_id) for env_id in ids)
 
 
-def population_size(requested: int) -> int:
-    if requested < 2:
-        raise UserError(f"--popsize must be at least 2 (one mirrored pair), got {requested}")
-    if requested % 2:
-        say(f"note: --popsize {requested} is odd; mirrored sampling needs pairs, using {requested + 1}")
-        return requested + 1
-    return requested
-
-
 TASK_BYTES = 160  # memory per episode of a generation: its task record, result, queue entry and shaping
 
 
@@ -88,8 +79,6 @@ def config_from_args(kind: str, args: argparse.Namespace) -> TrainConfig:
     if unmet is not None:
         raise UserError(unmet)
     seed = values["seed"] if "seed" in {*from_file, *flags} else secrets.randbelow(2**31)
-    if isinstance(values["popsize"], int) and not isinstance(values["popsize"], bool):
-        values["popsize"] = population_size(values["popsize"])
     values.update(seed=seed, env_ids=(), recipe_modules=())
     try:
         config = TrainConfig.from_values(values, "--config " + args.config if args.config else "flags")
@@ -148,8 +137,6 @@ def checked_resume(kind: str, args: argparse.Namespace) -> tuple[TrainConfig, Ru
     if args.config is not None:
         raise UserError("--config cannot be combined with --resume: the run's settings are in its config.json")
     flags = given(args)
-    if "popsize" in flags:
-        flags["popsize"] += flags["popsize"] % 2  # as a new run would round it
     resumable = [item for item in declared() if item.spec.resumable]
     try:
         resumed = config.overlay(flags, {item.name for item in resumable})

@@ -27,9 +27,7 @@ from policies.pytorch_es import ConvLSTMPolicy, SmallNetPolicy
 from policies.reservoir import BOUNDS, MAX_UNITS, Hyperparameters, ReservoirFrontEnd, check_evolve_start, head_network
 from policies.rules import RULES
 from policies.static import StaticPolicy
-from settings import SEED_RANGE, check, setting
-
-MODERN = "beyond the original algorithm (defaults: the original)"
+from settings import MODERN, SEED_RANGE, check, setting
 
 
 @dataclass(frozen=True)

@@ -285,7 +285,7 @@ CASES = {
                                            prepare=lambda run, work: hold_lock(run)),
     # the experiment scripts
     "paper.py --dry-run with a bad value": Case(lambda run, work: ["experiments/paper.py", "ant", "static", "--dry-run",
-                                                                   "--popsize", "1"], "--popsize must be at least 2"),
+                                                                   "--popsize", "1"], "--popsize must be a whole"),
     "paper.py on a folder with other settings": Case(
         lambda run, work: ["experiments/paper.py", "ant", "static", "--dry-run", "--popsize", "8", "--folder",
                            str(work)],
