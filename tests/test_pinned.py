@@ -65,7 +65,7 @@ CASES: dict[str, tuple[str, tuple[str, ...]]] = {
     # exp), PGPE (ClipUp's norms) and SNES (exp and log in its update)
     "static small net, PGPE": ("static", ("--environment", "Pendulum-v1", "--popsize", "6", "--generations", "2",
                                           "--seed", "61", "--network", "small", "--strategy", "pgpe")),
-    "hebbian SNES": ("hebbian", ("--environment", "Pendulum-v1", "--popsize", "5", "--generations", "2",
+    "hebbian SNES": ("hebbian", ("--environment", "Pendulum-v1", "--popsize", "6", "--generations", "2",
                                  "--seed", "62", "--strategy", "snes")),
 }
 
