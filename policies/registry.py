@@ -34,11 +34,10 @@ from settings import MODERN, SEED_RANGE, check, setting
 class Network:
     build: Callable[[NetworkSpec], Policy]
     preprocessing: str = "default"  # the images it is fed: envs.recipes.PREPROCESSING
-    fast_conv: bool = False  # its CNN is the one --fast_conv computes (build takes fast_conv=True)
 
 
 NETWORKS: dict[str, Network] = {
-    "default": Network(StaticPolicy, fast_conv=True),
+    "default": Network(StaticPolicy),
     "small": Network(SmallNetPolicy),
     "lstm": Network(ConvLSTMPolicy, preprocessing="pytorch-es"),
 }
@@ -73,10 +72,6 @@ class PolicySettings:
     obs_clip: float | None = setting(None, low=0, low_open=True, requires=("obs_norm", True), metavar="C",
                                      evaluation=True, group=MODERN, shown_default="no clip",
                                      help="clip normalised observations to +-C (OpenAI: 5)")
-    fast_conv: bool = setting(False, scripts=EVALUATED, evaluation=True, group=MODERN,
-                              help="pixel networks (the default CNN) only: the CNN as one compiled pass, about 4x "
-                                   "faster per frame, equal to the torch path up to float32 rounding (about 1e-5), "
-                                   "not bit for bit (docs/speed-carracing.md)")
     reservoir: bool = setting(False, scripts=EVALUATED, evaluation=True, group=RESERVOIR,
                               help="the network reads the state of a random reservoir (ER-MRL's leaky echo state "
                                    "network, reset every episode) that reads the observation; not for pixels; needs "
@@ -128,27 +123,10 @@ class Kind:
 
 
 KINDS: dict[str, Kind] = {
-    "static": Kind(lambda settings, net, normalise: network_of(settings).build(net, **fast_conv_option(settings)),
-                   plastic=False),
+    "static": Kind(lambda settings, net, normalise: network_of(settings).build(net), plastic=False),
     "hebbian": Kind(lambda settings, net, normalise: HebbianPolicy(net, settings.hebb_rule, settings.init_weights,
-                                                                   normalise, settings.distribution,
-                                                                   settings.fast_conv), plastic=True),
+                                                                   normalise, settings.distribution), plastic=True),
 }
-
-
-def fast_conv_option(settings: PolicySettings) -> dict:
-    """The keyword for ``--fast_conv`` of a network that has its CNN (``check_fast_conv`` refuses the others)."""
-    return {"fast_conv": True} if settings.fast_conv else {}
-
-
-def check_fast_conv(settings: PolicySettings, net: NetworkSpec) -> None:
-    """Refuse ``--fast_conv`` where there is no default CNN to compute."""
-    if not net.pixels:
-        raise ValueError(f"--fast_conv computes the CNN of pixel observations, but these observations are vectors "
-                         f"{net.obs_shape}; leave --fast_conv out")
-    if not network_of(settings).fast_conv:
-        raise ValueError(f"--fast_conv computes the default network's CNN, which --network {settings.network} does "
-                         "not have; leave --fast_conv out")
 
 
 def kind_of(settings: PolicySettings) -> Kind:
@@ -176,10 +154,7 @@ def make_policy(settings: PolicySettings, net: NetworkSpec, normalise: bool = Tr
     weight normalisation (upstream spec §4.3), used by plastic kinds only. With ``reservoir`` the
     network reads a reservoir's state (a ValueError for pixels, or without reservoirpy). With
     ``obs_norm`` a vector-input network sees normalised observations (through the reservoir, if any);
-    a pixel network is left as it is. With ``fast_conv`` the CNN is the compiled pass (``policies.conv``;
-    a ValueError for state vectors and pytorch-es's networks)."""
-    if settings.fast_conv:
-        check_fast_conv(settings, net)
+    a pixel network is left as it is."""
     if settings.reservoir:
         policy = reservoir_front_end(settings, net, normalise)
     else:

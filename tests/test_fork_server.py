@@ -68,8 +68,6 @@ def test_pixel_policies_name_torch_and_state_policies_nothing(kind):
     assert ProblemSpec(("CartPole-v1",), PolicySettings(kind=kind)).build().policy.worker_modules == ()
     normalised = ProblemSpec(("CartPole-v1",), PolicySettings(kind=kind, obs_norm=True)).build().policy
     assert normalised.worker_modules == ()  # (a front end's are its inner policy's)
-    compiled = ProblemSpec(("CarRacing-v3",), PolicySettings(kind=kind, fast_conv=True)).build().policy
-    assert compiled.worker_modules == ()  # --fast_conv: the CNN without torch
 
 
 def test_the_fork_server_loads_torch_before_the_workers_of_a_pixel_policy():

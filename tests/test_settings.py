@@ -127,6 +127,21 @@ def test_a_previous_versions_run_resumes_to_its_numbers_and_records_only_its_kin
         assert "network" not in policy and policy["hebb_rule"] == "A"
 
 
+@pytest.mark.parametrize("fast_conv", [False, True])
+def test_a_run_that_recorded_the_retired_fast_conv_resumes_and_evaluates(fast_conv, tmp_path):
+    """config.json files of the versions with --fast_conv (issue 31, removed by issue 41) record it; such a run
+    is read as today's (the default CNN, for pixels): it evaluates and resumes to today's numbers."""
+    run_dir = copy_run("static", tmp_path)
+    config = json.loads((run_dir / "config.json").read_text())
+    config["policy"]["fast_conv"] = fast_conv
+    (run_dir / "config.json").write_text(json.dumps(config, indent=2))
+    assert returns(evaluate_static, tmp_path, "--path_weights", run_dir) == RECORDED["static"][0]
+    code, out, err = main(train_static, "--resume", run_dir, "--generations", 3)
+    assert code == 0, out + err
+    assert hashlib.sha256(load_dat(run_dir / "last.dat").tobytes()).hexdigest() == RECORDED["static"][1]
+    assert "fast_conv" not in json.loads((run_dir / "config.json").read_text())["policy"]
+
+
 # --- config.json ---------------------------------------------------------------------------------------
 
 
