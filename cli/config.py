@@ -1,4 +1,5 @@
-"""A run's configuration: the four settings of ``es``, ``policies`` and ``envs``, joined, and read from
+"""A run's configuration: the settings of ``es`` (the search, the run), ``policies``, ``envs`` and
+``report.loggers``, joined, and read from
 what a user hands in (config.json, an experiment file) with every key checked against its declaration
 (``settings``).
 
@@ -6,7 +7,8 @@ what a user hands in (config.json, an experiment file) with every key checked ag
 sections in TOML (``experiments/*.toml``). A setting that does not apply to the run's policy kind is
 not recorded (no ``hebb_rule`` for a static run), and refused when given. config.json files of earlier
 versions are read too: one flat object, or sections that recorded every setting whatever the kind
-(those hold the defaults, and are dropped). Resume and evaluation start from the recorded settings and
+(those hold the defaults, and are dropped), without the sections added since (``LATER_SECTIONS``), with
+the keys of settings since retired (``RETIRED``). Resume and evaluation start from the recorded settings and
 apply the flags given (``overlay``): a flag that contradicts the recording is refused, naming both values.
 """
 
@@ -20,9 +22,11 @@ from pathlib import Path
 from envs import EnvSettings
 from es.settings import ESSettings, RunSettings
 from policies import PolicySettings
+from report.loggers import LogSettings
 from settings import Option, contradictions, options, type_problem
 
-SECTIONS = {"es": ESSettings, "policy": PolicySettings, "env": EnvSettings, "run": RunSettings}
+SECTIONS = {"es": ESSettings, "policy": PolicySettings, "env": EnvSettings, "run": RunSettings, "log": LogSettings}
+LATER_SECTIONS = ("log",)  # absent from the config.json of earlier versions (their loggers: RETIRED's run.tensorboard)
 TRAIN_SCRIPTS = {"static": "train_static.py", "hebbian": "train_hebb.py"}
 
 
@@ -49,6 +53,7 @@ class TrainConfig:
     policy: PolicySettings
     env: EnvSettings
     run: RunSettings
+    log: LogSettings = LogSettings()
 
     def to_dict(self) -> dict:
         """The sections, without the settings that do not apply to this policy kind."""
@@ -64,7 +69,7 @@ class TrainConfig:
         if "es" not in data and "kind" in data:
             known = {item.name for item in declared()}
             return cls.from_values({key: value for key, value in data.items() if key in known}, source)
-        missing = [name for name in SECTIONS if not isinstance(data.get(name), dict)]
+        missing = [name for name in SECTIONS if not isinstance(data.get(name), dict) and name not in LATER_SECTIONS]
         if missing:
             raise ValueError(f"{source} has no {', '.join(repr(name) for name in missing)} section; a run's "
                              f"config.json holds the sections {', '.join(SECTIONS)}")
@@ -117,6 +122,8 @@ RETIRED: dict[tuple[str, str], Callable[[object], dict]] = {
     # --fast_conv, the compiled CNN, was removed (issue 41: no faster than the default CNN); such a run goes on, and is
     # evaluated, with the default CNN, whose features differ from its by about 1e-5 (docs/speed-carracing.md)
     ("policy", "fast_conv"): lambda value: {},
+    # --tensorboard, a setting of the run until issue 41, is --logger tensorboard (the flag stays, as its alias)
+    ("run", "tensorboard"): lambda value: {"logger": ("tensorboard",)} if value is True else {},
 }
 
 

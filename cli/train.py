@@ -26,8 +26,8 @@ from es.interrupts import honour_sigint
 from es.loop import NonFiniteUpdate, Status, Trainer
 from es.runfolder import RunFolder, SaveError, release_locks
 from es.settings import ESSettings
-from report import tensorboard
 from report.log import FitnessPlot, GenerationLog
+from report.loggers import Loggers, missing
 from report.progress import display_for
 from settings import type_problem, unmet_requirement
 
@@ -151,10 +151,10 @@ def checked_resume(kind: str, args: argparse.Namespace) -> tuple[TrainConfig, Ru
     return resumed, folder
 
 
-def check_tensorboard(config: TrainConfig) -> None:
-    if config.run.tensorboard and not tensorboard.available():
-        raise UserError(f"--tensorboard needs the tensorboard package, which is not installed; install it with: "
-                        f"{tensorboard.INSTALL_HINT}")
+def check_loggers(config: TrainConfig) -> None:
+    """Refuse, before anything starts, a --logger whose packages are not installed."""
+    if (problem := missing(config.log)) is not None:
+        raise UserError(problem)
 
 
 def check_writable(folder: str) -> None:
@@ -184,10 +184,12 @@ def write_config(trainer: Trainer, config: TrainConfig, problem, command: list[s
     folder = trainer.folder
     earlier = folder.read_config() if (folder.path / "config.json").exists() else {}
     line = " ".join(command)
-    data = TrainConfig(trainer.es, config.policy, config.env, config.run).to_dict()
+    data = replace(config, es=trainer.es).to_dict()
     data.update(command=earlier.get("command", line), resumed=earlier.get("resumed", []) + ([line] if earlier else []),
                 versions=versions(), num_params=trainer.policy.num_params, layout=trainer.policy.layout.describe(),
                 workers=trainer.evaluator.workers, wrappers=problem.wrappers())
+    with explained("cannot start the loggers"):
+        data["log"].update(trainer.begin(data))  # the loggers' settings once; their trackers' run ids, recorded
     folder.write_config(data)
 
 
@@ -208,9 +210,8 @@ def start(config: TrainConfig, folder: RunFolder | None) -> tuple[Trainer, objec
             except OSError as error:
                 raise UserError(f"--folder {config.run.folder}: {error.strerror or error}") from None
         with explained("cannot start the run"):
-            reporters = [GenerationLog(log), FitnessPlot()]
-            if config.run.tensorboard:
-                reporters.append(tensorboard.TensorBoardLog(folder.path, problem.policy.metrics_columns))
+            reporters = [GenerationLog(log), FitnessPlot(),
+                         Loggers(config.log, folder.path, problem.policy.metrics_columns, log)]
             trainer = Trainer.start(config.es, config.run, problem, spec.build, config.env.env_ids, folder,
                                     config.env.label, log=log, display=display_for(sys.stdout), reporters=reporters)
     except BaseException:
@@ -232,7 +233,7 @@ def train_main(kind: str, parser: Parser, argv: list[str] | None = None) -> int:
         else:
             config, folder = config_from_args(kind, args), None
             check_writable(config.run.folder)
-        check_tensorboard(config)
+        check_loggers(config)
         trainer, problem = start(config, folder)
         if folder is None:
             write_config(trainer, config, problem, [parser.prog, *argv])

@@ -112,10 +112,6 @@ class RunSettings:
                                       shown_default="start a local Ray with --threads CPUs",
                                       help="'auto' joins the cluster `ray start` runs on this machine, HOST:PORT "
                                            "another one")
-    tensorboard: bool = setting(False, resumable=True, group=MODERN,
-                                help="also write every metrics column as TensorBoard scalars in <run>/tensorboard "
-                                     "(pip install -r requirements-tensorboard.txt)")
-
     def __post_init__(self) -> None:
         check(self)
 

@@ -142,6 +142,15 @@ def test_a_run_that_recorded_the_retired_fast_conv_resumes_and_evaluates(fast_co
     assert "fast_conv" not in json.loads((run_dir / "config.json").read_text())["policy"]
 
 
+def test_a_run_that_recorded_tensorboard_as_a_run_setting_logs_to_tensorboard():
+    """Until issue 41 TensorBoard was the run's setting ``tensorboard``; such a config.json reads as --logger."""
+    config = json.loads((RUNS / "static" / "config.json").read_text())
+    assert "log" not in config and config["run"]["tensorboard"] is False
+    assert TrainConfig.from_dict(config).log.logger == ()
+    config["run"]["tensorboard"] = True
+    assert TrainConfig.from_dict(config).log.logger == ("tensorboard",)
+
+
 # --- config.json ---------------------------------------------------------------------------------------
 
 
@@ -256,7 +265,8 @@ def test_the_original_flags_are_all_there():
 
 def test_resumable_and_requires_come_from_the_declarations(tmp_path):
     resumable = {item.name for item in declared() if item.spec.resumable}
-    assert resumable == {"generations", "threads", "backend", "ray_address", "print_every", "tensorboard"}
+    assert resumable == {"generations", "threads", "backend", "ray_address", "print_every", "logger", "wandb_project",
+                         "mlflow_uri", "mlflow_experiment"}
     run_dir = copy_run("static", tmp_path)
     code, _, err = main(train_static, "--resume", run_dir, "--lr", "0.3", "--generations", 3)
     one_line(code, err, "--lr 0.3 (the run has 0.2)", "only --generations, --print_every, --threads")
