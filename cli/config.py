@@ -21,13 +21,13 @@ from pathlib import Path
 
 from envs import EnvSettings
 from es.settings import ESSettings, RunSettings
-from policies import PolicySettings
+from policies import KINDS, PolicySettings
 from report.loggers import LogSettings
 from settings import Option, contradictions, options, type_problem
 
 SECTIONS = {"es": ESSettings, "policy": PolicySettings, "env": EnvSettings, "run": RunSettings, "log": LogSettings}
 LATER_SECTIONS = ("log",)  # absent from the config.json of earlier versions (their loggers: RETIRED's run.tensorboard)
-TRAIN_SCRIPTS = {"static": "train_static.py", "hebbian": "train_hebb.py"}
+TRAIN_SCRIPTS = {name: kind.scripts[0] for name, kind in KINDS.items()}  # the training script of each policy kind
 
 
 def declared() -> list[Option]:
@@ -88,7 +88,7 @@ class TrainConfig:
     @classmethod
     def from_toml(cls, path: str | Path) -> TrainConfig:
         sections = read_toml(path)
-        kind = sections.get("policy", {}).get("kind", "static")
+        kind = sections.get("policy", {}).get("kind", PolicySettings.kind)
         return cls.from_values(section_values(sections, f"--config {path}", kind=kind), f"--config {path}")
 
     def with_values(self, **values) -> TrainConfig:
@@ -132,7 +132,7 @@ def section_values(sections: dict, source: str, kind: str | None = None, recorde
     checked: unknown keys and keys that do not apply to the policy kind are refused with their names; a
     config.json of an earlier version, which recorded every setting, may hold those at their defaults, and the
     keys of ``RETIRED``."""
-    kind = kind or sections.get("policy", {}).get("kind", "static")
+    kind = kind or sections.get("policy", {}).get("kind", PolicySettings.kind)
     flat, unknown, foreign = {}, [], []
     for name, settings in SECTIONS.items():
         entries = sections.get(name, {})

@@ -1,8 +1,10 @@
 """Policy kinds by name, and the settings that choose one.
 
-A new kind of network is one module that implements ``policies.base.Policy`` plus one line in
-``KINDS``: a function from (settings, network spec, whether the environment normalises plastic
-weights) to the policy. Nothing else in the project branches on the kind.
+A new kind of network is one module that implements ``policies.base.Policy`` plus one entry in
+``KINDS`` (``Kind``): a function from (settings, network spec, whether the environment normalises plastic
+weights) to the policy, whether its weights are plastic, the scripts that train and evaluate it, and the
+evaluate script's flags of its files. Nothing else in the project branches on the kind: the scripts, the
+printed commands and config.json take what they need of a kind from its entry.
 
 A front end changes what any kind reads: ``--reservoir`` puts an echo state network between the
 observation and the network (``policies.reservoir``); ``--obs_norm`` normalises what comes first.
@@ -117,15 +119,34 @@ class PolicySettings:
 
 
 @dataclass(frozen=True)
+class FileFlag:
+    """The evaluate script's flag for one of the files a kind's policies save (``Policy.roles``)."""
+
+    flag: str  # "--path_hebb"
+    roles: tuple[str, ...]  # the roles it can give; a policy has one of them (CNN weights or co-evolved ones)
+    holds: str  # what the file holds, for --help
+
+
+@dataclass(frozen=True)
 class Kind:
+    """A kind of policy: how to build one, and what the scripts need to know of it."""
+
     build: Callable[[PolicySettings, NetworkSpec, bool], Policy]
     plastic: bool  # its weights change within an episode, so the environments' normalisation matters
+    scripts: tuple[str, str]  # its training script and its evaluate script
+    files: tuple[FileFlag, ...]  # the evaluate script's flags of its files; the first its main file (roles[0])
 
 
 KINDS: dict[str, Kind] = {
-    "static": Kind(lambda settings, net, normalise: network_of(settings).build(net), plastic=False),
+    "static": Kind(lambda settings, net, normalise: network_of(settings).build(net), plastic=False,
+                   scripts=("train_static.py", "evaluate_static.py"),
+                   files=(FileFlag("--path_weights", ("weights",), "evolved weights"),)),
     "hebbian": Kind(lambda settings, net, normalise: HebbianPolicy(net, settings.hebb_rule, settings.init_weights,
-                                                                   normalise, settings.distribution), plastic=True),
+                                                                   normalise, settings.distribution), plastic=True,
+                    scripts=("train_hebb.py", "evaluate_hebb.py"),
+                    files=(FileFlag("--path_hebb", ("coeffs",), "Hebbian coefficients"),
+                           FileFlag("--path_coev", ("CNN_parameters", "coevolved_initial_weights"),
+                                    "CNN weights (pixel environments) or of co-evolved initial weights"))),
 }
 
 
