@@ -63,8 +63,8 @@ class LoggerEntry:
     """A logger as the registry holds it."""
 
     make: Callable[..., Logger]  # (the run's LogSettings, its folder) -> the logger
-    modules: tuple[str, ...]  # what it imports
-    extra: str  # the extra that installs them: requirements-<extra>.txt, pyproject.toml's [<extra>]
+    modules: tuple[str, ...] = ()  # what it imports beside the project's requirements
+    extra: str = ""  # the extra that installs them: requirements-<extra>.txt, pyproject.toml's [<extra>]
     settings: type[LoggerSettings] = LoggerSettings  # the dataclass declaring its own settings
 
     @property
