@@ -147,9 +147,6 @@ def evaluate_command(args: argparse.Namespace, arm: str, run_dir: Path) -> list[
     command = [sys.executable, str(ROOT / EVALUATE_SCRIPTS[kind]),
                "--environment", args.evaluate_on or args.environment,
                "--episodes", str(args.episodes), "--seed", "0", "--json", str(run_dir / "evaluation.json")]
-    if kind == "hebbian":
-        policy = json.loads((run_dir / "config.json").read_text())["policy"]
-        command += ["--hebb_rule", policy["hebb_rule"], "--init_weights", policy["init_weights"]]
     files = [(flag, run_dir / named_file("last", role)) for role, flag in EVALUATE_FLAGS.items()]
     return command + [word for flag, path in files if path.exists() for word in (flag, str(path))]
 
