@@ -104,10 +104,12 @@ class TrainConfig:
 
     def fixed(self) -> dict:
         """The settings a resume may not change, flat (``{"popsize": 4, ...}``): what a checkpoint records
-        of the settings it was written under (``es.runfolder.settings_record``)."""
+        of the settings it was written under (``es.runfolder.settings_record``). The loggers' section is left
+        out: it says where a run reports, never what it computes, and records a tracker's run id once the
+        tracker has given one."""
         resumable = {item.name for item in declared() if item.spec.resumable}
-        return {key: value for section in self.to_dict().values() for key, value in section.items()
-                if key not in resumable}
+        return {key: value for name, section in self.to_dict().items() if name != "log"
+                for key, value in section.items() if key not in resumable}
 
     def value(self, name: str):
         """A field by name, whichever section holds it."""
