@@ -88,6 +88,20 @@ def _last_row(metrics: Path) -> dict | None:
     return None
 
 
+def share_niceness(pid: int) -> None:
+    """Give the session of process ``pid`` this process's niceness as a whole (Linux's autogroups).
+
+    The child runs in a session of its own, and where the kernel groups CPU time by session
+    (``/proc/sys/kernel/sched_autogroup_enabled``), a new session is a new group with niceness 0, shared
+    fairly with every other session: a campaign started under ``nice -n 19`` would then take half of a
+    machine's CPU from a test suite or a benchmark in another session, its own niceness ranking it only
+    within its group. Writing the niceness into ``/proc/PID/autogroup`` ranks the whole group, its
+    workers included. Elsewhere (no autogroups, another system) nothing is done.
+    """
+    with contextlib.suppress(OSError):
+        Path(f"/proc/{pid}/autogroup").write_text(f"{os.nice(0)}\n")
+
+
 class Chunk:
     """One chunk of training: ``command`` as a child, under ``deadline`` (``time.monotonic()``), with
     ``find_metrics()`` giving the run's metrics.csv once the run folder exists."""
@@ -114,6 +128,7 @@ class Chunk:
             seen, duration = self.last_generation()  # a resumed run's: its next generation starts with the child
             began = time.monotonic()
             self.child = subprocess.Popen(self.command, cwd=self.cwd, start_new_session=True)  # only we signal it
+            share_niceness(self.child.pid)
             while self.child.poll() is None:
                 if not self.asked and duration is not None and began + 2 * SAFETY * duration > self.deadline:
                     self._ask("the budget leaves no room for another generation after this one")

@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from es.runfolder import read_checkpoint
 from experiments.campaign import prune
@@ -249,3 +250,19 @@ def test_the_status_says_how_far_each_run_got(tmp_path, monkeypatch, capsys):
     assert capsys.readouterr().out.strip() == f"wrote {tmp_path / 'results' / 'carracing_curves.png'} (static seed 1)"
     assert (tmp_path / "results" / "carracing_curves.png").read_bytes().startswith(b"\x89PNG")
     assert paper_script.main(["ant", "curves", "--runs", str(tmp_path / "results")]) == 2
+
+
+@pytest.mark.skipif(not Path("/proc/self/autogroup").exists(), reason="no autogroups: Linux's scheduler setting")
+def test_a_chunk_gives_its_session_the_campaigns_niceness():
+    """The training child runs in a session of its own, a scheduling group of its own where the kernel has
+    autogroups: started under nice -n 19, the campaign ranks that whole group at 19, not only the child in it."""
+    script = ("import os, subprocess, sys, time; from pathlib import Path\n"
+              "sys.path.insert(0, sys.argv[1]); from experiments.campaign import share_niceness\n"
+              "os.nice(7)\n"
+              "child = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(30)'],\n"
+              "                         start_new_session=True)\n"
+              "share_niceness(child.pid)\n"
+              "print(Path(f'/proc/{child.pid}/autogroup').read_text().split()[-1]); child.kill()\n")
+    done = subprocess.run([sys.executable, "-c", script, str(ROOT)], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["7"]
