@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Environment steps to solve CartPole-v1, this tool against EvoTorch 0.6.1, judged by the same code.
 
-    python benchmarks/vs_evotorch.py --strategies snes,pgpe --settings matched,defaults --seeds 10
+    python benchmarks/vs_evotorch.py --strategies snes,pgpe --settings matched,matched_from_zeros,defaults --seeds 10
 
 The speed side by side is ``benchmarks/vs_evotorch_speed.py``; this script counts steps, which no load moves
 (its record is not timed).
@@ -40,11 +40,13 @@ steps than a run of EvoTorch, P(this tool < EvoTorch) (ties count a half), with 
 **The rows.** ``matched``: the same settings on both sides, EvoTorch's CartPole settings where it documents
 them (σ from EvoTorch's radius 2.25, observation normalisation on every episode, population 64, each
 strategy's learning rates, the same initial centre: this tool's initialisation for the seed, no L2 penalty in
-this tool's fitness). ``defaults``: each tool as its documentation sets it up: this tool's ``train_static.py
---strategy S`` defaults; EvoTorch's CartPole example (PGPE, examples/notebooks/Functional_API/problem.ipynb)
-and its documented SNES for networks (docs/user_guide/supervised_ne.md), both with the example's observation
-normalisation. The record holds the settings table, each run's steps, and the results table
-(docs/strategies.md renders both). Needs: pip install -r requirements-bench.txt
+this tool's fitness). ``matched_from_zeros``: the same, both starting from zeros, as EvoTorch's example does
+(its own default centre is U(±1e-5)). ``defaults``: each tool as its documentation sets it up: this tool's
+``train_static.py --strategy S`` defaults; EvoTorch's CartPole example (PGPE,
+examples/notebooks/Functional_API/problem.ipynb) and its documented SNES for networks
+(docs/user_guide/supervised_ne.md), both with the example's observation normalisation. The record holds the
+settings table, each run's steps, and the results table (docs/strategies.md renders both). Needs: pip install
+-r requirements-bench.txt
 """
 
 from __future__ import annotations
@@ -74,7 +76,7 @@ from policies import PolicySettings
 
 INSTALL_HINT = "pip install -r requirements-bench.txt"
 STRATEGIES = ("snes", "pgpe")
-SETTINGS = ("matched", "defaults")
+SETTINGS = ("matched", "matched_from_zeros", "defaults")
 HELD_OUT = (2**31, 2**32)  # the judge's seeds; this tool's training seeds are below 2**31 - 1
 HELD_OUT_STREAM = 5  # the judge's seeds are drawn from [run seed, HELD_OUT_STREAM]
 EVOTORCH_RADIUS = 2.25  # radius_init of EvoTorch's CartPole example and of its networks' examples
@@ -88,6 +90,7 @@ MATCHED_POPSIZE = 64
 class Ours:
     es: ESSettings
     obs_norm: bool
+    centre: str = "this tool"  # where the search starts: this tool's initialisation for the seed, or "zeros"
 
 
 @dataclass(frozen=True)
@@ -106,14 +109,15 @@ def rows(strategies: list[str], settings: list[str], dim: int) -> list[Row]:
     made = []
     for strategy in strategies:
         for name in settings:
-            if name == "matched":
+            if name.startswith("matched"):
                 common = dict(popsize=MATCHED_POPSIZE, sigma=sigma, obs_norm_prob=1.0, fitness_l2=0.0)
                 ours = (ESSettings(strategy="pgpe", pgpe_lr=pgpe["center_lr"], clipup_max_speed=pgpe["max_speed"],
                                    pgpe_sigma_lr=pgpe["sigma_lr"], pgpe_max_sigma_change=pgpe["max_sigma_change"],
                                    **common) if strategy == "pgpe" else ESSettings(strategy="snes", **common))
-                theirs = EvoTorchSettings(strategy, MATCHED_POPSIZE, sigma=sigma, obs_norm=True, centre="this tool",
+                centre = "zeros" if name == "matched_from_zeros" else "this tool"
+                theirs = EvoTorchSettings(strategy, MATCHED_POPSIZE, sigma=sigma, obs_norm=True, centre=centre,
                                           **(pgpe if strategy == "pgpe" else {}))
-                made.append(Row(strategy, name, Ours(ours, True), theirs))
+                made.append(Row(strategy, name, Ours(ours, True, centre), theirs))
             else:
                 theirs = (EvoTorchSettings("pgpe", 100, radius=EVOTORCH_RADIUS, obs_norm=True, centre="zeros", **pgpe)
                           if strategy == "pgpe" else
@@ -139,7 +143,7 @@ def settings_table(row: Row, dim: int) -> list[list]:
         if row.ours.obs_norm else "no"
     centre = {"this tool": "this tool's initialisation", "zeros": "zeros", "evotorch": "EvoTorch's, U(±1e-5)"}
     return [[row.strategy, row.settings, "this tool", es.popsize, f"{es.sigma:.4g}", ours_norm, ours_rates,
-             f"{es.fitness_l2:g}", "this tool's initialisation"],
+             f"{es.fitness_l2:g}", centre[row.ours.centre]],
             [row.strategy, row.settings, "EvoTorch", theirs.popsize, f"{their_sigma:.4g}",
              "yes, every episode" if theirs.obs_norm else "no", their_rates, "–", centre[theirs.centre]]]
 
@@ -204,6 +208,8 @@ def run_ours(row: Row, args: argparse.Namespace, seed: int, judge: Judge) -> int
                                 spec.build, spec.env_ids, RunFolder(Path(folder)), args.environment,
                                 log=lambda line: None)
         trainer.evaluator = counter = MemberSteps(trainer.evaluator, row.ours.es.popsize)
+        if row.ours.centre == "zeros":
+            trainer.state = trainer.strategy.initial_state(np.zeros_like(trainer.state.theta))
         try:
             while counter.steps < args.budget:
                 trainer.generation()
@@ -330,7 +336,7 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
                                      epilog="\n".join(__doc__.splitlines()[2:]))
     parser.add_argument("--environment", default="CartPole-v1")
     parser.add_argument("--strategies", default="snes,pgpe", help="comma-separated, of " + ", ".join(STRATEGIES))
-    parser.add_argument("--settings", default="matched,defaults", help="comma-separated, of " + ", ".join(SETTINGS))
+    parser.add_argument("--settings", default=",".join(SETTINGS), help="comma-separated, of " + ", ".join(SETTINGS))
     parser.add_argument("--seeds", type=int, default=10, help="runs of each tool per row: seeds 1 .. N")
     parser.add_argument("--budget", type=int, default=500_000,
                         help="environment steps after which a run stops; unsolved, it counts as this many")

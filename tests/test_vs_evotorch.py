@@ -168,13 +168,15 @@ def test_steps_to_solve_command_writes_its_tables(tmp_path, capsys):
     record = json.loads(path.read_text())
     assert record["timed"] is False and record["loaded"] is False
     assert set(record["measures"]) == {f"{strategy}_{settings}_{tool}" for strategy in ("snes", "pgpe")
-                                       for settings in ("matched", "defaults") for tool in ("this_tool", "evotorch")}
+                                       for settings in vs_evotorch.SETTINGS for tool in ("this_tool", "evotorch")}
     for measure in record["measures"].values():
         assert measure["rounds"] == 2 and all(0 < value <= 300 or value == 300 for value in measure["values"])
     settings, results = record["notes"]["settings"], record["notes"]["results"]
-    assert len(settings["rows"]) == 8 and len(results["rows"]) == 4
+    assert len(settings["rows"]) == 12 and len(results["rows"]) == 6
     matched_snes = [row for row in settings["rows"] if row[:2] == ["snes", "matched"]]
     assert [row[3] for row in matched_snes] == [64, 64] and matched_snes[0][4] == matched_snes[1][4]
+    from_zeros = [row for row in settings["rows"] if row[1] == "matched_from_zeros"]
+    assert {row[-1] for row in from_zeros} == {"zeros"}
     assert all(set(cell) >= {"value", "low", "high"} for row in results["rows"] for cell in (row[2], row[3], row[6]))
 
 
