@@ -57,6 +57,12 @@ ANY = object()  # ``requires=("eval_every", ANY)``: any value but off (False, No
 # the largest float32: the parameters are float32, and so is the fitness the original's Fitness_values file
 # records; a scale above it (--sigma, --fitness_l2) overflows them for any value of magnitude 1 or more
 FLOAT32_MAX = 3.4028234663852886e38
+MODERN = "beyond the original algorithm (defaults: the original)"  # --help's group of the options the original lacks
+
+
+def optional_float(text: str) -> float | None:
+    """A flag's number, or ``none`` for no value."""
+    return None if text.strip().lower() == "none" else float(text)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -114,6 +120,11 @@ class Option:
     def applies_to(self, kind: str | None) -> bool:
         return kind is None or self.spec.applies is None or kind in self.spec.applies
 
+    @property
+    def many(self) -> bool:
+        """A tuple of values (``--logger wandb mlflow``), each one of the choices if there are any."""
+        return typing.get_origin(self.base_type()) is tuple
+
     def base_type(self):
         """The field's type without ``| None``."""
         options = [item for item in _union(self.hint) if item is not type(None)]
@@ -169,7 +180,7 @@ def expected(item: Option) -> str:
     if spec.rule is not None:
         return spec.rule[1]
     if item.choices is not None:
-        return f"one of {', '.join(map(str, item.choices))}"
+        return f"{'one or more' if item.many else 'one'} of {', '.join(map(str, item.choices))}"
     if spec.nonempty:
         return "a non-empty string"
     whole = item.base_type() is int
@@ -192,14 +203,14 @@ def value_problem(item: Option, value) -> str | None:
     if spec.rule is not None:
         valid = spec.rule[0](value)
     elif item.choices is not None:
-        valid = value in item.choices
+        valid = all(one in item.choices for one in value) if item.many else value in item.choices
     elif spec.nonempty:
         valid = bool(value.strip())
     elif isinstance(value, (int, float)) and not isinstance(value, bool):
         valid = math.isfinite(value) and _in_range(spec, value)
     else:
         valid = True
-    shown = repr(value) if isinstance(value, str) else value
+    shown = repr(value) if isinstance(value, str) else " ".join(map(str, value)) if item.many else value
     return None if valid else f"{item.label} must be {expected(item)}, got {shown}"
 
 
@@ -236,6 +247,9 @@ def requirement(item: Option, declared) -> tuple[str, Callable[[dict], bool]] | 
         if wanted is ANY or wanted is True:
             words.append(other.label)
             tests.append(lambda values, name=name: values.get(name) not in (None, False))
+        elif other.many:  # one of the values given: --wandb_project with --logger wandb (among others)
+            words.append(f"{other.label} {wanted}")
+            tests.append(lambda values, name=name, wanted=wanted: wanted in (values.get(name) or ()))
         else:
             words.append(f"{other.label} {wanted}")
             tests.append(lambda values, name=name, wanted=wanted: values.get(name) == wanted)

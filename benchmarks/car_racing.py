@@ -4,7 +4,6 @@
     python benchmarks/car_racing.py               # speed, the training loops, the projection
     python benchmarks/car_racing.py --memory      # and the paper's Hebbian run's memory (PSS/USS)
     python benchmarks/car_racing.py --identity    # and long episodes compared step by step
-    python benchmarks/car_racing.py --fast_conv   # and the Hebbian loop with the opt-in compiled CNN
 
 Gymnasium's class is ``CarRacingStock-v3``, the project's ``CarRacing-v3``. Everything is timed in
 CPU time of this process, the two classes alternating (every 25 steps for ``env.step``, reset by
@@ -26,9 +25,6 @@ on both alike; the medians over rounds are printed.
 - the projection of the paper's Hebbian run (population 200, 300 generations, episodes of 1000
   steps) on 2 and 16 workers from the capped Hebbian loop's cost per step, as
   ``experiments/step_cost.py`` does: (popsize + 1) x 1000 x step / workers per generation;
-- ``--fast_conv``: the capped Hebbian loop again, the fast class's network with ``--fast_conv``
-  (``policies.conv``: not bit for bit; docs/speed-carracing.md) against the stock class's with the default CNN,
-  and its projection;
 - ``--memory``: ``train_hebb.py`` at the paper's population (200) with 2 workers for one
   generation, its processes' summed PSS and USS (``/proc/PID/smaps_rollup``) sampled while it runs,
   once per round;
@@ -207,13 +203,10 @@ def _pixel_chain(problem):
     return pixels, squash, pixels.env
 
 
-def capped_loop_rates(kind: str, rounds: int, episodes: int, length: int,
-                      fast_conv: bool = False) -> tuple[list[float], list[float], float]:
+def capped_loop_rates(kind: str, rounds: int, episodes: int, length: int) -> tuple[list[float], list[float], float]:
     """Steps per CPU second of the capped training loop with each class, per round (resets counted), and
-    the fast class's mean steps per episode (fewer than ``length`` where the car leaves the playfield);
-    ``fast_conv``: the fast class's network with ``--fast_conv`` (the stock class's with the default CNN)."""
-    problems = [ProblemSpec((STOCK_ID,), PolicySettings(kind)).build(),
-                ProblemSpec((FAST_ID,), PolicySettings(kind, fast_conv=fast_conv)).build()]
+    the fast class's mean steps per episode (fewer than ``length`` where the car leaves the playfield)."""
+    problems = [ProblemSpec((env_id,), PolicySettings(kind)).build() for env_id in (STOCK_ID, FAST_ID)]
     params = problems[0].policy.initial_params(np.random.default_rng(0))
     for problem in problems:
         capped_episode(problem, params, 0, 3)  # warm-up: compilation
@@ -229,7 +222,7 @@ def capped_loop_rates(kind: str, rounds: int, episodes: int, length: int,
                     steps[index] += count
             for index in range(2):
                 rates[index].append(steps[index] / seconds[index])
-            fast_steps += steps[1]  # (the stock class's are the same steps, but with --fast_conv's network)
+            fast_steps += steps[1]
     finally:
         for problem in problems:
             problem.close()
@@ -463,8 +456,6 @@ def main() -> int:
     parser.add_argument("--share_steps", type=positive_int, default=600, help="steps measured for the policy's share")
     parser.add_argument("--memory", action="store_true",
                         help="also measure the paper's Hebbian run's memory (one generation per round)")
-    parser.add_argument("--fast_conv", action="store_true",
-                        help="also the capped Hebbian loop and the projection with the opt-in compiled CNN")
     parser.add_argument("--identity", action="store_true", help="also compare long episodes frame by frame")
     parser.add_argument("--episodes_compared", type=positive_int, default=20,
                         help="with --identity: how many episodes")
@@ -492,11 +483,6 @@ def main() -> int:
                 LOOP_TARGET if kind == "hebbian" else None)
         if kind == "hebbian":
             projection(record, "projection", (stock, fast), "", args.length)
-    if args.fast_conv:
-        stock, fast, mean_steps = capped_loop_rates("hebbian", args.rounds, args.episodes, args.length, fast_conv=True)
-        summary(record, "capped_loop_hebbian_fast_conv", f"{capped} ({mean_steps:.0f} on average), hebbian, the fast "
-                "class with --fast_conv against the stock class with the default CNN", stock, fast, LOOP_TARGET)
-        projection(record, "projection_fast_conv", (stock, fast), " with --fast_conv", args.length)
     for kind in ("static", "hebbian"):
         parts = policy_share(kind, args.share_steps)
         total = sum(parts.values())

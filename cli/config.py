@@ -1,4 +1,5 @@
-"""A run's configuration: the four settings of ``es``, ``policies`` and ``envs``, joined, and read from
+"""A run's configuration: the settings of ``es`` (the search, the run), ``policies``, ``envs`` and
+``report.loggers``, joined, and read from
 what a user hands in (config.json, an experiment file) with every key checked against its declaration
 (``settings``).
 
@@ -6,23 +7,27 @@ what a user hands in (config.json, an experiment file) with every key checked ag
 sections in TOML (``experiments/*.toml``). A setting that does not apply to the run's policy kind is
 not recorded (no ``hebb_rule`` for a static run), and refused when given. config.json files of earlier
 versions are read too: one flat object, or sections that recorded every setting whatever the kind
-(those hold the defaults, and are dropped). Resume and evaluation start from the recorded settings and
+(those hold the defaults, and are dropped), without the sections added since (``LATER_SECTIONS``), with
+the keys of settings since retired (``RETIRED``). Resume and evaluation start from the recorded settings and
 apply the flags given (``overlay``): a flag that contradicts the recording is refused, naming both values.
 """
 
 from __future__ import annotations
 
 import tomllib
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from envs import EnvSettings
 from es.settings import ESSettings, RunSettings
-from policies import PolicySettings
+from policies import KINDS, PolicySettings
+from report.loggers import LogSettings
 from settings import Option, contradictions, options, type_problem
 
-SECTIONS = {"es": ESSettings, "policy": PolicySettings, "env": EnvSettings, "run": RunSettings}
-TRAIN_SCRIPTS = {"static": "train_static.py", "hebbian": "train_hebb.py"}
+SECTIONS = {"es": ESSettings, "policy": PolicySettings, "env": EnvSettings, "run": RunSettings, "log": LogSettings}
+LATER_SECTIONS = ("log",)  # absent from the config.json of earlier versions (their loggers: RETIRED's run.tensorboard)
+TRAIN_SCRIPTS = {name: kind.scripts[0] for name, kind in KINDS.items()}  # the training script of each policy kind
 
 
 def declared() -> list[Option]:
@@ -48,6 +53,7 @@ class TrainConfig:
     policy: PolicySettings
     env: EnvSettings
     run: RunSettings
+    log: LogSettings = LogSettings()
 
     def to_dict(self) -> dict:
         """The sections, without the settings that do not apply to this policy kind."""
@@ -63,7 +69,7 @@ class TrainConfig:
         if "es" not in data and "kind" in data:
             known = {item.name for item in declared()}
             return cls.from_values({key: value for key, value in data.items() if key in known}, source)
-        missing = [name for name in SECTIONS if not isinstance(data.get(name), dict)]
+        missing = [name for name in SECTIONS if not isinstance(data.get(name), dict) and name not in LATER_SECTIONS]
         if missing:
             raise ValueError(f"{source} has no {', '.join(repr(name) for name in missing)} section; a run's "
                              f"config.json holds the sections {', '.join(SECTIONS)}")
@@ -82,7 +88,7 @@ class TrainConfig:
     @classmethod
     def from_toml(cls, path: str | Path) -> TrainConfig:
         sections = read_toml(path)
-        kind = sections.get("policy", {}).get("kind", "static")
+        kind = sections.get("policy", {}).get("kind", PolicySettings.kind)
         return cls.from_values(section_values(sections, f"--config {path}", kind=kind), f"--config {path}")
 
     def with_values(self, **values) -> TrainConfig:
@@ -98,10 +104,12 @@ class TrainConfig:
 
     def fixed(self) -> dict:
         """The settings a resume may not change, flat (``{"popsize": 4, ...}``): what a checkpoint records
-        of the settings it was written under (``es.runfolder.settings_record``)."""
+        of the settings it was written under (``es.runfolder.settings_record``). The loggers' section is left
+        out: it says where a run reports, never what it computes, and records a tracker's run id once the
+        tracker has given one."""
         resumable = {item.name for item in declared() if item.spec.resumable}
-        return {key: value for section in self.to_dict().values() for key, value in section.items()
-                if key not in resumable}
+        return {key: value for name, section in self.to_dict().items() if name != "log"
+                for key, value in section.items() if key not in resumable}
 
     def value(self, name: str):
         """A field by name, whichever section holds it."""
@@ -118,11 +126,22 @@ class TrainConfig:
         return self.with_values(**{name: value for name, value in given.items() if name in changeable})
 
 
+# keys of earlier versions that no setting declares any more: (section, key) -> what a value of it becomes today
+RETIRED: dict[tuple[str, str], Callable[[object], dict]] = {
+    # --fast_conv, the compiled CNN, was removed (issue 41: no faster than the default CNN); such a run goes on, and is
+    # evaluated, with the default CNN, whose features differ from its by about 1e-5 (docs/speed-carracing.md)
+    ("policy", "fast_conv"): lambda value: {},
+    # --tensorboard, a setting of the run until issue 41, is --logger tensorboard (the flag stays, as its alias)
+    ("run", "tensorboard"): lambda value: {"logger": ("tensorboard",)} if value is True else {},
+}
+
+
 def section_values(sections: dict, source: str, kind: str | None = None, recorded: bool = False) -> dict:
     """The flat settings of sectioned data (a config.json when ``recorded``, else an experiment file), every key
     checked: unknown keys and keys that do not apply to the policy kind are refused with their names; a
-    config.json of an earlier version, which recorded every setting, may hold those at their defaults."""
-    kind = kind or sections.get("policy", {}).get("kind", "static")
+    config.json of an earlier version, which recorded every setting, may hold those at their defaults, and the
+    keys of ``RETIRED``."""
+    kind = kind or sections.get("policy", {}).get("kind", PolicySettings.kind)
     flat, unknown, foreign = {}, [], []
     for name, settings in SECTIONS.items():
         entries = sections.get(name, {})
@@ -131,7 +150,9 @@ def section_values(sections: dict, source: str, kind: str | None = None, recorde
         known = {item.name: item for item in options(settings)}
         for key, value in entries.items():
             item = known.get(key)
-            if item is None or (item.spec.derived and not recorded):
+            if (name, key) in RETIRED:
+                flat.update(RETIRED[name, key](value))
+            elif item is None or (item.spec.derived and not recorded):
                 unknown.append(f"{name}.{key}")
             elif not item.applies_to(kind):
                 if not recorded or value != item.default:

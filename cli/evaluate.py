@@ -26,7 +26,7 @@ import numpy as np
 from cli.config import Contradiction, TrainConfig, declared
 from cli.errors import USER_ERRORS, Parser, UserError, explained, say
 from cli.flags import add_settings, defaults, episode_seed_value, flag_value, given, positive_int
-from cli.hints import EVALUATE_FLAGS, EVALUATE_SCRIPTS, MAIN_ROLE
+from cli.hints import EVALUATE_SCRIPTS, RESERVOIR_FILE
 from cli.train import resolve_environments
 from envs import ProblemSpec
 from envs.headless import RenderingUnavailable, check_can_render, check_display, choose_mujoco_gl
@@ -36,12 +36,11 @@ from es.observations import SavedStatistics, load_statistics, statistics_path
 from es.outputs import JSON_SUFFIXES
 from es.outputs import check_outputs as check_paths
 from es.runfolder import named_file
+from policies import KINDS
 from report.plots import FIGURE_SUFFIXES
-from report.video import VIDEO_SUFFIXES
+from report.video import STRIP_EVERY, VIDEO_SUFFIXES
 from settings import EPISODE_SEED_RANGE, SEED_RANGE, unmet_requirement
 
-COEV_ROLES = (  # --path_coev's
-    "coevolved_initial_weights", "CNN_parameters")
 FROM_RUN = "the run's, from the config.json beside the weights; else"
 
 
@@ -50,17 +49,15 @@ def evaluation_parser(prog: str, description: str, kind: str) -> Parser:
     for evaluating a ``kind`` (``cli.flags``)."""
     parser = Parser(prog=prog, description=description)
     add = parser.add_argument
-    main = EVALUATE_FLAGS[MAIN_ROLE[kind]]
-    what = {"static": "evolved weights", "hebbian": "Hebbian coefficients"}[kind]
-    add(main, required=True, metavar="FILE",
-        help=f"the .dat file of {what}, or a run folder (its {named_file('last', MAIN_ROLE[kind])})")
-    if kind == "hebbian":
-        add("--path_coev", default=None, metavar="FILE",
-            help="the .dat file of CNN weights (pixel environments) or of co-evolved initial weights (default: in a "
-                 "run folder, the one beside the coefficients)")
-    add("--path_reservoir", default=None, metavar="FILE",
-        help="the evolved reservoir hyperparameters of a --reservoir_evolve run (default: in a run folder, "
-             "best_reservoir.dat or last_reservoir.dat beside the weights)")
+    main, *others = KINDS[kind].files
+    add(main.flag, required=True, metavar="FILE",
+        help=f"the .dat file of {main.holds}, or a run folder (its {named_file('last', main.roles[0])})")
+    for file in others:
+        add(file.flag, default=None, metavar="FILE",
+            help=f"the .dat file of {file.holds} (default: in a run folder, the one beside the {main.holds})")
+    add(RESERVOIR_FILE.flag, default=None, metavar="FILE",
+        help=f"{RESERVOIR_FILE.holds} (default: in a run folder, best_reservoir.dat or last_reservoir.dat beside the "
+             f"{main.holds})")
     add("--episodes", type=positive_int, default=1, metavar="N", help="episodes per environment (default: 1)")
     add("--seed", type=episode_seed_value, default=0,
         help="seed of the first episode; episode i uses seed + i; a whole number from {} to {}, the seeds from "
@@ -69,7 +66,8 @@ def evaluation_parser(prog: str, description: str, kind: str) -> Parser:
     add("--render", type=flag_value, nargs="?", const=True, default=False, metavar="BOOL",
         help="show the episodes in a window (needs a display)")
     add("--video", default=None, metavar="PATH",
-        help=f"write the first episode to this video file ({', '.join(VIDEO_SUFFIXES)}), frame by frame")
+        help=f"write the first episode to this video file ({', '.join(VIDEO_SUFFIXES)}), frame by frame; a "
+             f".png: a strip of every {STRIP_EVERY}th frame")
     add("--json", default=None, metavar="PATH",
         help="also write the statistics (per environment: returns, mean, std, steps, seeds; for ants "
              "the distances and forward displacements walked) to this JSON file")
@@ -82,9 +80,14 @@ def evaluation_parser(prog: str, description: str, kind: str) -> Parser:
     return parser
 
 
+def file_flags(kind: str) -> tuple:
+    """The evaluate script's file flags for a ``kind`` (``policies.registry.FileFlag``), its main file's first."""
+    return (*KINDS[kind].files, RESERVOIR_FILE)
+
+
 def path_flags(args: argparse.Namespace) -> dict[str, str]:
     """flag -> path of the weight files given."""
-    flags = ("--path_weights", "--path_hebb", "--path_coev", "--path_reservoir")
+    flags = [file.flag for file in file_flags(args.kind)]
     return {flag: getattr(args, flag[2:]) for flag in flags if getattr(args, flag[2:], None) is not None}
 
 
@@ -149,7 +152,7 @@ def saved_statistics(weight_file: Path) -> SavedStatistics | None:
 def main_file(kind: str, given: str) -> Path:
     """The file the script reads first: the one given, or in a run folder given as such its ``last`` file."""
     path = Path(given)
-    return path / named_file("last", MAIN_ROLE[kind]) if (path / "config.json").is_file() else path
+    return path / named_file("last", KINDS[kind].files[0].roles[0]) if (path / "config.json").is_file() else path
 
 
 def recorded_config(kind: str, weight_file: Path) -> TrainConfig | None:
@@ -192,18 +195,19 @@ def evaluation_config(kind: str, args: argparse.Namespace, weight_file: Path,
     return replace(config, policy=replace(config.policy, obs_norm=obs_norm, obs_clip=clip if obs_norm else None))
 
 
-def weight_arrays(args: argparse.Namespace, weight_file: Path, first: np.ndarray, policy, settings) -> dict:
+def weight_arrays(args: argparse.Namespace, weight_file: Path, first: np.ndarray, policy) -> dict:
     """role -> array: the files given, each refused if this policy has no such file, and the run's others
     of the same prefix beside ``weight_file`` (``best_reservoir.dat`` beside ``best.dat``)."""
     from es.files import load_dat
 
-    coev = COEV_ROLES[0] if settings.init_weights == "coevolve" else COEV_ROLES[1]
+    flags = {file.flag: file for file in file_flags(args.kind)}
     paths = {}
     for flag, path in path_flags(args).items():
-        role = coev if flag == "--path_coev" else next(role for role, name in EVALUATE_FLAGS.items() if name == flag)
-        if role not in policy.roles:
-            raise UserError(f"{flag} {path}: this policy has no such file (its files: "
-                            f"{', '.join(EVALUATE_FLAGS[role] for role in policy.roles)}); leave {flag} out")
+        role = next((role for role in flags[flag].roles if role in policy.roles), None)
+        if role is None:
+            mine = [file.flag for file in flags.values() if set(file.roles) & set(policy.roles)]
+            raise UserError(f"{flag} {path}: this policy has no such file (its files: {', '.join(mine)}); leave "
+                            f"{flag} out")
         paths[role] = Path(path)
     prefix = next((prefix for prefix in ("best", "last") if weight_file.name == named_file(prefix, policy.roles[0])),
                   None)
@@ -248,9 +252,9 @@ def evaluate_main(kind: str, parser: Parser, argv: list[str] | None = None) -> i
         show(report)
 
     try:
-        weight_file = main_file(kind, getattr(args, EVALUATE_FLAGS[MAIN_ROLE[kind]][2:]))
-        check_outputs(args, [str(weight_file), *(path for flag, path in path_flags(args).items()
-                                                 if flag != EVALUATE_FLAGS[MAIN_ROLE[kind]])])
+        main_flag = KINDS[kind].files[0].flag
+        weight_file = main_file(kind, getattr(args, main_flag[2:]))
+        check_outputs(args, [str(weight_file), *(path for flag, path in path_flags(args).items() if flag != main_flag)])
         if args.seed + args.episodes - 1 > EPISODE_SEED_RANGE[1]:
             raise UserError(f"--seed {args.seed} with --episodes {args.episodes} runs past the largest episode seed "
                             f"{EPISODE_SEED_RANGE[1]}")
@@ -265,7 +269,7 @@ def evaluate_main(kind: str, parser: Parser, argv: list[str] | None = None) -> i
         with explained("bad reservoir settings"):
             problem = build_problem(ProblemSpec(env_ids, config.policy), render_mode)
         normalise_observations(problem, weight_file, statistics)
-        arrays = weight_arrays(args, weight_file, first, problem.policy, config.policy)
+        arrays = weight_arrays(args, weight_file, first, problem.policy)
         with explained("cannot load the weights"):
             params = problem.policy.load(arrays)
         if (weight_file.parent / "config.json").is_file():

@@ -48,7 +48,7 @@ def help_text(item: Option, default: str) -> str:
     return f"{text} (default: {default})" if default else text
 
 
-HELP_ORDER = ("env", "es", "run", "policy")  # --help as the original's: the environment first
+HELP_ORDER = ("env", "es", "run", "policy", "log")  # --help as the original's: the environment first
 
 
 def script_options(script: str, kind: str) -> list[Option]:
@@ -73,14 +73,17 @@ def add_settings(parser: argparse.ArgumentParser, script: str, kind: str, defaul
         common = {"dest": item.name, "default": argparse.SUPPRESS, "help": text}
         if item.base_type() is bool and item.spec.parse is None:
             action = add(f"--{item.flag}", action="store_true", **common)
+        elif item.many:  # --logger wandb mlflow; given twice, or with an alias, the values add up
+            action = add(f"--{item.flag}", nargs="+", action="extend", choices=item.choices, metavar=item.spec.metavar,
+                         **common)
         else:
             action = add(f"--{item.flag}", type=converter(item), choices=item.choices, metavar=item.spec.metavar,
                          **common)
         action.shown_default = default  # for the docs' tables: argparse's default is SUPPRESS
         action.plain_help = help_text(item, "")  # the help without its default
         for alias, value in item.spec.aliases.items():
-            alias_action = add(f"--{alias}", dest=item.name, action="store_const", const=value,
-                               default=argparse.SUPPRESS, help=f"the same as --{item.flag} {value}")
+            alias_action = add(f"--{alias}", dest=item.name, action="append_const" if item.many else "store_const",
+                               const=value, default=argparse.SUPPRESS, help=f"the same as --{item.flag} {value}")
             alias_action.shown_default, alias_action.plain_help = "", alias_action.help
 
 

@@ -14,17 +14,21 @@ import sys
 from pathlib import Path
 
 from cli.config import TRAIN_SCRIPTS, TrainConfig
+from policies import KINDS
+from policies.registry import FileFlag
 
 ROOT = Path(__file__).resolve().parent.parent
 
-EVALUATE_SCRIPTS = {"static": "evaluate_static.py", "hebbian": "evaluate_hebb.py"}
-# the evaluate scripts' flag of each file role a policy exports (``Policy.roles``)
-EVALUATE_FLAGS = {"weights": "--path_weights", "coeffs": "--path_hebb", "CNN_parameters": "--path_coev",
-                  "coevolved_initial_weights": "--path_coev", "reservoir": "--path_reservoir"}
-MAIN_ROLE = {"static": "weights", "hebbian": "coeffs"}  # the file an evaluate script is given, and looks beside
+EVALUATE_SCRIPTS = {name: kind.scripts[1] for name, kind in KINDS.items()}
+# the front end's file, whatever the kind: a --reservoir_evolve run's evolved hyperparameters
+RESERVOIR_FILE = FileFlag("--path_reservoir", ("reservoir",), "the evolved reservoir hyperparameters of a "
+                                                              "--reservoir_evolve run")
+# the evaluate scripts' flag of each file role a policy exports (``Policy.roles``), from the kinds' entries
+EVALUATE_FLAGS = {role: file.flag for kind in KINDS.values() for file in (*kind.files, RESERVOIR_FILE)
+                  for role in file.roles}
 
-__all__ = ["EVALUATE_FLAGS", "EVALUATE_SCRIPTS", "TRAIN_SCRIPTS", "command", "evaluate_hint", "resume_hint",
-           "script_path"]
+__all__ = ["EVALUATE_FLAGS", "EVALUATE_SCRIPTS", "RESERVOIR_FILE", "TRAIN_SCRIPTS", "command", "evaluate_hint",
+           "resume_hint", "script_path"]
 
 
 def script_path(name: str) -> str:
@@ -45,4 +49,4 @@ def resume_hint(config: TrainConfig, run_dir: Path) -> str:
 def evaluate_hint(config: TrainConfig, weight_file: Path) -> str:
     """The command that evaluates a run's weight file (the rest comes from its folder) over 10 episodes."""
     kind = config.policy.kind
-    return command(EVALUATE_SCRIPTS[kind], EVALUATE_FLAGS[MAIN_ROLE[kind]], Path(weight_file), "--episodes", 10)
+    return command(EVALUATE_SCRIPTS[kind], KINDS[kind].files[0].flag, Path(weight_file), "--episodes", 10)

@@ -29,8 +29,8 @@ from es.interrupts import honour_sigint
 from es.loop import NonFiniteUpdate, Status, Trainer
 from es.runfolder import Checkpoint, RunFolder, RunFolderError, SaveError, release_locks, settings_record
 from es.settings import ESSettings
-from report import tensorboard
 from report.log import FitnessPlot, GenerationLog
+from report.loggers import Loggers, missing
 from report.progress import display_for
 from settings import contradictions, type_problem, unmet_requirement
 
@@ -58,15 +58,6 @@ def resolve_environments(text: str) -> tuple[str, ...]:
     return tuple(envs.resolve_env_id(env_id) for env_id in ids)
 
 
-def population_size(requested: int) -> int:
-    if requested < 2:
-        raise UserError(f"--popsize must be at least 2 (one mirrored pair), got {requested}")
-    if requested % 2:
-        say(f"note: --popsize {requested} is odd; mirrored sampling needs pairs, using {requested + 1}")
-        return requested + 1
-    return requested
-
-
 TASK_BYTES = 160  # memory per episode of a generation: its task record, result, queue entry and shaping
 
 
@@ -91,8 +82,6 @@ def config_from_args(kind: str, args: argparse.Namespace) -> TrainConfig:
     if unmet is not None:
         raise UserError(unmet)
     seed = values["seed"] if "seed" in {*from_file, *flags} else secrets.randbelow(2**31)
-    if isinstance(values["popsize"], int) and not isinstance(values["popsize"], bool):
-        values["popsize"] = population_size(values["popsize"])
     values.update(seed=seed, env_ids=(), recipe_modules=())
     try:
         config = TrainConfig.from_values(values, "--config " + args.config if args.config else "flags")
@@ -151,8 +140,6 @@ def checked_resume(kind: str, args: argparse.Namespace) -> tuple[TrainConfig, Ru
     if args.config is not None:
         raise UserError("--config cannot be combined with --resume: the run's settings are in its config.json")
     flags = given(args)
-    if "popsize" in flags:
-        flags["popsize"] += flags["popsize"] % 2  # as a new run would round it
     resumable = [item for item in declared() if item.spec.resumable]
     try:
         resumed = config.overlay(flags, {item.name for item in resumable})
@@ -193,10 +180,10 @@ def edited_settings(checkpoint: Checkpoint, config: TrainConfig) -> list[str]:
     return contradictions({name: recorded.get(name, defaults.get(name)) for name in current}, current, declared())
 
 
-def check_tensorboard(config: TrainConfig) -> None:
-    if config.run.tensorboard and not tensorboard.available():
-        raise UserError(f"--tensorboard needs the tensorboard package, which is not installed; install it with: "
-                        f"{tensorboard.INSTALL_HINT}")
+def check_loggers(config: TrainConfig) -> None:
+    """Refuse, before anything starts, a --logger whose packages are not installed."""
+    if (problem := missing(config.log)) is not None:
+        raise UserError(problem)
 
 
 def check_writable(folder: str) -> None:
@@ -226,11 +213,13 @@ def write_config(trainer: Trainer, config: TrainConfig, problem, command: list[s
     folder = trainer.folder
     earlier = folder.read_config() if (folder.path / "config.json").exists() else {}
     line = " ".join(command)
-    settings = TrainConfig(trainer.es, config.policy, config.env, config.run)
+    settings = replace(config, es=trainer.es)
     data = settings.to_dict()
     data.update(command=earlier.get("command", line), resumed=earlier.get("resumed", []) + ([line] if earlier else []),
                 versions=versions(), num_params=trainer.policy.num_params, layout=trainer.policy.layout.describe(),
                 workers=trainer.evaluator.workers, wrappers=problem.wrappers())
+    with explained("cannot start the loggers"):
+        data["log"].update(trainer.begin(data))  # the loggers' settings once; their trackers' run ids, recorded
     folder.write_config(data)
     folder.settings = settings_record(settings.fixed())  # what its checkpoints record from now on
 
@@ -252,9 +241,8 @@ def start(config: TrainConfig, folder: RunFolder | None) -> tuple[Trainer, objec
             except OSError as error:
                 raise UserError(f"--folder {config.run.folder}: {error.strerror or error}") from None
         with explained("cannot start the run"):
-            reporters = [GenerationLog(log), FitnessPlot()]
-            if config.run.tensorboard:
-                reporters.append(tensorboard.TensorBoardLog(folder.path, problem.policy.metrics_columns))
+            reporters = [GenerationLog(log), FitnessPlot(),
+                         Loggers(config.log, folder.path, problem.policy.metrics_columns, log)]
             trainer = Trainer.start(config.es, config.run, problem, spec.build, config.env.env_ids, folder,
                                     config.env.label, log=log, display=display_for(sys.stdout), reporters=reporters)
     except BaseException:
@@ -276,7 +264,7 @@ def train_main(kind: str, parser: Parser, argv: list[str] | None = None) -> int:
         else:
             config, folder = config_from_args(kind, args), None
             check_writable(config.run.folder)
-        check_tensorboard(config)
+        check_loggers(config)
         trainer, problem = start(config, folder)
         if folder is None:
             write_config(trainer, config, problem, [parser.prog, *argv])

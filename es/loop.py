@@ -85,11 +85,22 @@ class CenterReport:
 
 
 class Reporter(Protocol):
+    """What the loop tells whoever reports on a run (the generation log, the figure, the loggers); each
+    subclasses this and overrides what it does (the defaults do nothing)."""
+
+    def begin(self, record: dict, generation: int) -> dict:
+        """As the run starts (generation 0) or resumes after ``generation``, with the settings config.json
+        records; what config.json should record beside them (a tracker's run id)."""
+        return {}
+
     def generation(self, row: dict) -> None:
         """After every generation, with its metrics row."""
 
     def saved(self, folder: RunFolder, rows: list[dict]) -> None:
         """After every save of the run's files, with every metrics row so far."""
+
+    def finished(self, folder: RunFolder) -> None:
+        """When the run has run all its generations, after its last save."""
 
     def close(self) -> None:
         """When the run ends."""
@@ -141,7 +152,17 @@ class Trainer:
                         return Status.INTERRUPTED
             except (EvaluationError, WorkerStartError, SaveError, NonFiniteUpdate) as error:
                 return self._stop(error)
+        for reporter in self.reporters:
+            reporter.finished(self.folder)
         return Status.DONE
+
+    def begin(self, record: dict) -> dict:
+        """Tell the reporters the run's settings (what config.json records) as it starts or resumes; what they
+        ask config.json to record beside them."""
+        recorded = {}
+        for reporter in self.reporters:
+            recorded.update(reporter.begin(record, self.state.generation))
+        return recorded
 
     def generation(self) -> dict:
         """One generation, top to bottom; its metrics row."""

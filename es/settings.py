@@ -1,16 +1,15 @@
 """The settings of the ES and of a run, as frozen data (the other concerns: ``policies.registry``'s
-``PolicySettings``, ``envs.settings``; ``cli.config`` joins the four into ``config.json``).
+``PolicySettings``, ``envs.settings``, ``report.loggers``' ``LogSettings``; ``cli.config`` joins them into
+``config.json``).
 
 Each field is the one declaration of its option (``settings.setting``): its default, range or choices,
-flag, help, and whether a resume may change it. Every constant the original hard-coded is a field here,
-with the original's value as its default (docs/original.md, "The evolution strategy"): the learning-rate floor, the
-sigma decay and floor, and the L2 coefficient of the fitness penalty; those have no flag (experiment files
-and config.json only). The options beyond the original (the shaping, the optimiser, weight decay in the
-gradient, observation statistics, centre evaluation; OpenAI's es-starter and pytorch-es, docs/original.md,
-"The evolution strategy" and "pytorch-es") default to the original's behaviour. The strategy
-(``--strategy``, ``es.strategies``; default openai, the original's) and each strategy's settings are one
-block of fields, each requiring the strategy it belongs to; the openai-only settings require
-``--strategy openai``.
+flag, help, and whether a resume may change it. ``ESSettings`` is the search's settings (``SearchSettings``:
+the population, the fitness, the episodes, the centre's evaluation, the strategy) joined with each
+strategy's own, which its module declares (``es.strategies``: OpenAI-ES's learning rate, schedules,
+shaping and optimiser; PGPE's, SNES's and ARS's), so that a run's ES settings stay one flat section of
+config.json and of an experiment file. Every constant the original hard-coded is a field, with the
+original's value as its default (docs/original.md, "The evolution strategy"); the options beyond the original
+default to the original's behaviour.
 """
 
 from __future__ import annotations
@@ -18,57 +17,23 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 
-from es.optimizers import OPTIMIZERS
-from es.shaping import SHAPINGS
-from es.strategies import PGPE_OPTIMIZERS, STRATEGIES
-from settings import ANY, FLOAT32_MAX, SEED_RANGE, check, setting
+from es.strategies import STRATEGIES
+from es.strategy import STRATEGY_GROUP, StrategySettings
+from settings import ANY, FLOAT32_MAX, MODERN, SEED_RANGE, check, setting
 
 BACKENDS = ("process", "ray")  # es.backends: a process pool on this machine, or Ray
-MODERN = "beyond the original algorithm (defaults: the original)"
-STRATEGY = "strategies beyond the original's OpenAI-ES (--strategy openai)"
-OPENAI = ("strategy", "openai")  # what the settings of OpenAI-ES's step require
-
-
-def optional_float(text: str) -> float | None:
-    """A flag's number, or ``none`` for no value."""
-    return None if text.strip().lower() == "none" else float(text)
 
 
 @dataclass(frozen=True)
-class ESSettings:
-    """What defines the search: two runs with equal ESSettings (and seed) step alike."""
+class SearchSettings(StrategySettings):
+    """What the loop reads beside the strategy's own settings, and which strategy it runs."""
 
-    popsize: int = setting(200, low=2, metavar="N", help="population size (even: mirrored pairs)")
-    lr: float = setting(0.2, requires=OPENAI, low=0, low_open=True, help="ES learning rate")
-    decay: float = setting(0.995, requires=OPENAI, low=0, high=1, low_open=True,
-                           help="learning-rate decay per generation (while lr > lr_floor)")
-    sigma: float = setting(0.1, low=0, low_open=True, high=FLOAT32_MAX,
-                           help="initial noise standard deviation (the members theta + sigma * noise are float32)")
-    lr_floor: float = setting(0.001, requires=OPENAI, flag=None, low=0, help="lr decays while above this")
-    sigma_decay: float = setting(0.999, requires=OPENAI, flag=None, low=0, high=1, low_open=True,
-                                 help="sigma *= sigma_decay per generation while sigma > sigma_floor")
-    sigma_floor: float = setting(0.01, requires=OPENAI, flag=None, low=0, help="sigma decays while above this")
     fitness_l2: float = setting(0.01, low=0, high=FLOAT32_MAX, metavar="C", group=MODERN,
                                 help="the original's L2 penalty in the fitness: return - C * mean(theta_m^2) "
                                      "(recorded in float32)")
     episodes: int = setting(1, low=1, metavar="E", help="episodes per fitness evaluation (the fitness is their mean)")
     noise_size: int | None = setting(None, flag=None, low=1,
                                      help="floats in the noise table; default: sized to the parameter count")
-    shaping: str = setting("rank_std", requires=OPENAI, choices=SHAPINGS, group=MODERN,
-                           help="fitness shaping: rank_std (the original: centered ranks, standardised), rank "
-                                "(OpenAI's centered ranks), none (the fitness, standardised), nes (pytorch-es's NES "
-                                "utilities)")
-    optimizer: str = setting("sgd", choices=OPTIMIZERS, aliases={"useAdam": "adam"}, requires=OPENAI, group=MODERN,
-                             help="sgd (the original), adam or momentum (OpenAI's; gradient sum F*eps / N); --lr is "
-                                  "the step size")
-    beta1: float = setting(0.9, low=0, high=1, high_open=True, requires=("optimizer", "adam"), group=MODERN,
-                           help="Adam's first-moment decay")
-    beta2: float = setting(0.999, low=0, high=1, high_open=True, requires=("optimizer", "adam"), group=MODERN,
-                           help="Adam's second-moment decay")
-    momentum: float = setting(0.9, low=0, high=1, high_open=True, requires=("optimizer", "momentum"), group=MODERN,
-                              help="the momentum of --optimizer momentum")
-    l2coeff: float = setting(0.0, requires=OPENAI, low=0, metavar="C", group=MODERN,
-                             help="weight decay in the gradient, g <- g - C * theta (OpenAI's l2coeff)")
     obs_norm_prob: float = setting(0.01, low=0, high=1, low_open=True, requires=("obs_norm", True), metavar="P",
                                    group=MODERN, help="the fraction of mirrored pairs whose observations update the "
                                                       "statistics of --obs_norm")
@@ -80,49 +45,29 @@ class ESSettings:
     variable_ep_len: bool = setting(False, group=MODERN,
                                     help="pytorch-es's adaptive episode length: each generation's episodes end after "
                                          "twice the mean length of the last generation's perturbed episodes")
-
-    # --- the strategy (es.strategies) and the settings of each
-    strategy: str = setting("openai", choices=STRATEGIES, group=STRATEGY,
+    strategy: str = setting("openai", choices=STRATEGIES, group=STRATEGY_GROUP,
                             help="openai (Salimans et al. 2017, the original), pgpe (Sehnke et al. 2010, with ClipUp), "
                                  "snes (separable NES), cma_es and sep_cma_es (the cmaes library: pip install -r "
                                  "requirements-strategies.txt), ars (Mania et al. 2018; V2 with --obs_norm "
                                  "--obs_norm_prob 1); docs/strategies.md")
-    pgpe_optimizer: str = setting("clipup", choices=PGPE_OPTIMIZERS, requires=("strategy", "pgpe"), group=STRATEGY,
-                                  help="how PGPE steps its centre (ClipUp, Toklu et al. 2020; Adam; plain gradient "
-                                       "ascent)")
-    pgpe_lr: float | None = setting(None, low=0, low_open=True, requires=("strategy", "pgpe"), group=STRATEGY,
-                                    shown_default="--clipup_max_speed / 2", help="PGPE's centre step size")
-    clipup_max_speed: float | None = setting(None, low=0, low_open=True, requires=("strategy", "pgpe"),
-                                             group=STRATEGY, shown_default="--sigma * sqrt(d) / 15, d the parameters",
-                                             help="ClipUp's maximum speed (the velocity's largest norm); by default "
-                                                  "the ClipUp paper's rule: initial radius sigma sqrt(d) = 15 x it")
-    clipup_momentum: float = setting(0.9, low=0, high=1, high_open=True, group=STRATEGY,
-                                     requires=(("strategy", "pgpe"), ("pgpe_optimizer", "clipup")),
-                                     help="ClipUp's momentum (the velocity's decay)")
-    pgpe_sigma_lr: float = setting(0.1, low=0, low_open=True, requires=("strategy", "pgpe"), group=STRATEGY,
-                                   help="PGPE: sigma += pgpe_sigma_lr * its gradient")
-    pgpe_max_sigma_change: float | None = setting(0.2, low=0, high=1, low_open=True, parse=optional_float,
-                                                  requires=("strategy", "pgpe"), metavar="C", group=STRATEGY,
-                                                  help="PGPE: each sigma changes by at most this fraction per "
-                                                       "generation; none: no limit")
-    snes_lr: float = setting(1.0, low=0, low_open=True, requires=("strategy", "snes"), group=STRATEGY,
-                             help="SNES: the centre's learning rate (the paper's 1)")
-    snes_sigma_lr: float | None = setting(None, low=0, low_open=True, requires=("strategy", "snes"), group=STRATEGY,
-                                          shown_default="(3 + ln d) / (5 sqrt d), d the parameters",
-                                          help="SNES: sigma's learning rate")
-    ars_lr: float = setting(0.02, low=0, low_open=True, requires=("strategy", "ars"), group=STRATEGY,
-                            help="ARS: the step size alpha")
-    ars_top: int | None = setting(None, low=1, requires=("strategy", "ars"), metavar="B", group=STRATEGY,
-                                  shown_default="all --popsize / 2",
-                                  help="ARS: the b best directions make the step (V1-t, V2-t)")
+
+
+def _own_settings() -> tuple[type, ...]:
+    """Each strategy's settings class, once, in the registry's order reversed (so that the fields come in the
+    registry's order), without the classes that another one extends (the shared base among them)."""
+    classes = list(dict.fromkeys(entry.settings for entry in STRATEGIES.values()))
+    return tuple(reversed([cls for cls in classes if not any(other is not cls and issubclass(other, cls)
+                                                             for other in classes)]))
+
+
+@dataclass(frozen=True)
+class ESSettings(*_own_settings(), SearchSettings):
+    """What defines the search: two runs with equal ESSettings (and seed) step alike. Its fields: the
+    search's (``SearchSettings``), then each strategy's own, in the registry's order."""
 
     def __post_init__(self) -> None:
         check(self)
-        directions = self.popsize // 2
-        if self.ars_top is not None and self.ars_top > directions:
-            raise ValueError(f"--ars_top must be a whole number from 1 to {directions} (the directions: --popsize / 2)"
-                             ", "
-                             f"got {self.ars_top}")
+        STRATEGIES[self.strategy].check(self.strategy, self)  # the population rule, the strategy's own checks
 
     def evaluates_centre(self, generation: int) -> bool:
         """Whether the centre runs its evaluation episodes in generation ``generation`` (0-based):
@@ -168,10 +113,6 @@ class RunSettings:
                                       shown_default="start a local Ray with --threads CPUs",
                                       help="'auto' joins the cluster `ray start` runs on this machine, HOST:PORT "
                                            "another one")
-    tensorboard: bool = setting(False, resumable=True, group=MODERN,
-                                help="also write every metrics column as TensorBoard scalars in <run>/tensorboard "
-                                     "(pip install -r requirements-tensorboard.txt)")
-
     def __post_init__(self) -> None:
         check(self)
 

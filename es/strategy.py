@@ -1,4 +1,4 @@
-"""The ask/tell interface every strategy shares, and the strategy of the original code: OpenAI-ES.
+"""The ask/tell interface every strategy shares, and what a strategy declares to the registry.
 
 The interface (``Strategy``, in the style of evosax): ``initial_state(theta)``; ``ask(state, rng,
 noise)`` returns the generation's ``Population`` -- a noise index and a sign per member (the wire
@@ -7,45 +7,48 @@ or, for a strategy that cannot draw from the noise table, the members' vectors (
 published once per generation as theta is; ``tell(state, noise, population, fitness)`` returns the
 new ``ESState`` and a dict of metrics (``update_factor``, ``skipped``). A strategy's own arrays live
 in ``ESState.strategy`` and the optimiser's in ``ESState.optimizer``, both saved in the checkpoint.
-The registry of strategies is ``es.strategies.STRATEGIES``.
 
-OpenAI-ES with mirrored sampling:
+A strategy's module (``es.strategies``) declares, as evosax's algorithms own their parameters:
 
-Salimans et al. 2017 ("Evolution Strategies as a Scalable Alternative to Reinforcement Learning"),
-Algorithm 2, as adapted by Najarro & Risi 2020 (docs/original.md, "The evolution strategy"):
+- its settings: a frozen dataclass subclassing ``StrategySettings`` (the population size and initial
+  sigma every strategy reads), each field made with ``settings.setting()`` and requiring its strategy
+  (``requires=("strategy", NAME)``), so that its flags, TOML keys, config.json keys, checks and docs
+  come from that one declaration (``es.settings.ESSettings`` joins every strategy's);
+- its entry (``StrategyEntry``): the factory from those settings and the number of parameters, the
+  settings class, and the population rule -- whether members come in mirrored pairs, which needs an
+  even ``--popsize`` (refused in one line otherwise, never rounded).
 
-- mirrored sampling: members 2p and 2p+1 are theta + sigma*eps_p and theta - sigma*eps_p;
-- fitness shaping (``es.shaping``), injected: by default centered ranks, then standardised;
-- the step (``es.optimizers``), injected: by default theta += lr / (N * sigma) * sum_m F_m * eps_m;
-  OpenAI's Adam or momentum on request, each with optional weight decay in the gradient;
-- schedules: lr *= decay while lr > lr_floor; sigma *= sigma_decay while sigma > sigma_floor,
-  whatever the optimiser (lr is its step size).
-
-``OpenES(settings)`` picks the shaping and the optimiser the settings name (``--shaping``,
-``--optimizer``) from their registries.
-
-The perturbations eps_p are slices of a shared noise table (``es.noise``), so a member is only a
-noise index and a sign. ``ask``/``tell`` work on a flat float32 vector and never print; ``tell``
-returns the new state and a dict of metrics.
+The registry of strategies is ``es.strategies.STRATEGIES``, one line per strategy.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
 
 from es.noise import NoiseTable
-from es.optimizers import Optimizer, OptimizerState, make_optimizer
-from es.shaping import SHAPINGS, Shaping
+from es.optimizers import OptimizerState
+from settings import FLOAT32_MAX, setting
+
+STRATEGY_GROUP = "strategies beyond the original's OpenAI-ES (--strategy openai)"  # their flags' --help group
 
 
-class ESSettings(Protocol):
-    """What a strategy reads of its settings: ``es.settings.ESSettings``, which imports the strategy
-    registry for its choices, so the strategies name it by this protocol instead of importing it."""
+@dataclass(frozen=True)
+class StrategySettings:
+    """What every strategy reads: the population and the initial scale of the search."""
 
-    def __getattr__(self, name: str) -> Any: ...
+    popsize: int = setting(200, low=2, metavar="N",
+                           help="population size (even for the strategies that sample mirrored pairs: openai, pgpe, "
+                                "ars)")
+    sigma: float = setting(0.1, low=0, low_open=True, high=FLOAT32_MAX,
+                           help="initial noise standard deviation (the members theta + sigma * noise are float32)")
+
+    def validate(self) -> None:
+        """What a strategy's settings refuse beyond each one's own range (a ValueError naming the flag);
+        called for the run's strategy only. Nothing here."""
 
 
 @dataclass(frozen=True)
@@ -85,6 +88,23 @@ class Strategy(Protocol):
         """The next state from each member's fitness (member order, higher is better), and metrics."""
 
 
+@dataclass(frozen=True)
+class StrategyEntry:
+    """A strategy as the registry holds it."""
+
+    make: Callable[[Any, int], Strategy]  # (the run's settings, an instance of ``settings``; parameters) -> it
+    settings: type[StrategySettings] = StrategySettings  # the dataclass declaring its own settings
+    pairs: bool = False  # its members are mirrored pairs: --popsize must be even
+
+    def check(self, name: str, settings: StrategySettings) -> None:
+        """The population rule, then the strategy's own (``validate``): a ValueError in one line."""
+        size = settings.popsize
+        if self.pairs and size % 2:
+            raise ValueError(f"--popsize {size} is odd, but --strategy {name} samples mirrored pairs; give an even "
+                             f"--popsize such as {size - 1} or {size + 1}")
+        self.settings.validate(settings)
+
+
 def mirrored_population(rng: np.random.Generator, noise: NoiseTable, dim: int, pairs: int) -> Population:
     """``pairs`` noise slices, each taken with + then - : [+e1, -e1, +e2, -e2, ...]."""
     indices = noise.sample_indices(rng, dim, pairs)
@@ -94,67 +114,3 @@ def mirrored_population(rng: np.random.Generator, noise: NoiseTable, dim: int, p
 def check_fitness(fitness: np.ndarray, population_size: int) -> None:
     if fitness.shape != (population_size,):
         raise ValueError(f"expected {population_size} fitness values, got shape {fitness.shape}")
-
-
-def decay_lr(lr: float, settings: ESSettings) -> float:
-    return lr * settings.decay if lr > settings.lr_floor else lr
-
-
-def decay_sigma(sigma: float, settings: ESSettings) -> float:
-    return sigma * settings.sigma_decay if sigma > settings.sigma_floor else sigma
-
-
-@dataclass(frozen=True)
-class OpenES:
-    settings: ESSettings
-    shaping: Shaping | None = None  # default: the one settings.shaping names
-    optimizer: Optimizer | None = None  # default: the one settings.optimizer names
-
-    def __post_init__(self) -> None:
-        if self.shaping is None:
-            object.__setattr__(self, "shaping", SHAPINGS[self.settings.shaping])
-        if self.optimizer is None:
-            object.__setattr__(self, "optimizer", make_optimizer(self.settings))
-        size = self.settings.popsize
-        if size < 2 or size % 2:
-            raise ValueError(f"population size must be even and >= 2, got {size}")
-
-    @property
-    def population_size(self) -> int:
-        return self.settings.popsize
-
-    @property
-    def pairs(self) -> int:
-        return self.population_size // 2
-
-    def initial_state(self, theta: np.ndarray) -> ESState:
-        return ESState(np.asarray(theta, dtype=np.float32), self.settings.lr, self.settings.sigma)
-
-    def ask(self, state: ESState, rng: np.random.Generator, noise: NoiseTable) -> Population:
-        """Noise index and sign of every member, in member order [+e1, -e1, +e2, -e2, ...]."""
-        return mirrored_population(rng, noise, state.theta.size, self.pairs)
-
-    def tell(self, state: ESState, noise: NoiseTable, population: Population,
-             fitness: np.ndarray) -> tuple[ESState, dict]:
-        """One step from the fitness of each member (member order, higher is better)."""
-        check_fitness(fitness, self.population_size)
-        shaped = self.shaping(fitness)
-        normaliser = self.population_size * state.sigma
-        theta, optimizer_state = state.theta, state.optimizer
-        if shaped is not None:
-            weighted_sum = self.weighted_noise(shaped, population.indices, noise, theta.size)
-            with np.errstate(over="ignore", invalid="ignore"):  # a non-finite step is the caller's to refuse
-                theta, optimizer_state = self.optimizer.step(theta, weighted_sum, self.population_size, state.sigma,
-                                                             state.lr, optimizer_state)
-        new_state = replace(state, theta=theta, lr=decay_lr(state.lr, self.settings),
-                            sigma=decay_sigma(state.sigma, self.settings), generation=state.generation + 1,
-                            optimizer=optimizer_state)
-        return new_state, {"update_factor": state.lr / normaliser, "skipped": shaped is None}
-
-    @staticmethod
-    def weighted_noise(shaped: np.ndarray, indices: np.ndarray, noise: NoiseTable, dim: int) -> np.ndarray:
-        """sum_m F_m eps_m over mirrored pairs: F+ eps + F- (-eps) = (F+ - F-) eps, in float64."""
-        total = np.zeros(dim, dtype=np.float64)
-        for weight, index in zip(shaped[0::2] - shaped[1::2], indices[0::2]):
-            total += weight * noise.slice(index, dim)
-        return total

@@ -52,7 +52,9 @@ sys.path.insert(0, str(ROOT))  # the project's modules, when run as a script
 from cli.errors import USER_ERRORS, Parser, say  # noqa: E402
 from cli.flags import non_empty, positive_float, positive_int, seed_value, threads_value  # noqa: E402
 from cli.hints import EVALUATE_SCRIPTS, TRAIN_SCRIPTS  # noqa: E402
+from es.runfolder import named_file  # noqa: E402
 from experiments import campaign  # noqa: E402
+from policies import KINDS  # noqa: E402
 from report.stats import DEFAULT_REPS  # noqa: E402
 
 FILES = ROOT / "experiments" / "paper"
@@ -150,19 +152,15 @@ def check_training(kind: str, command: list[str]) -> None:
 
 def evaluate_command(args: argparse.Namespace, experiment: dict, run_dir: Path) -> list[str]:
     """The final weights (last*.dat) on every body; statistics to JSON, one episode to a PNG."""
-    evaluation, policy = experiment["evaluation"], experiment["policy"]
+    evaluation = experiment["evaluation"]
     command = [sys.executable, str(ROOT / EVALUATE_SCRIPTS[args.kind]), "--environment", evaluation["environment"],
                "--episodes", str(args.episodes if args.episodes is not None else evaluation["episodes"]),
                "--seed", str(HELD_OUT_SEED),
                "--json", str(run_dir / "evaluation.json"), "--plot", str(run_dir / "adaptation.png")]
-    if args.kind == "static":
-        return command + ["--path_weights", str(run_dir / "last.dat")]
-    command += ["--hebb_rule", policy["hebb_rule"], "--init_weights", policy["init_weights"],
-                "--path_hebb", str(run_dir / "last_coeffs.dat")]
-    # pixel networks also save their CNN, co-evolved runs their initial weights: whichever the run wrote
-    second = [path for path in (run_dir / "last_CNN_parameters.dat", run_dir / "last_coevolved_initial_weights.dat")
-              if path.exists()]
-    return command + [word for path in second for word in ("--path_coev", str(path))]
+    # the run's main file: the evaluate script takes the rule, the network and the files beside it (a CNN,
+    # co-evolved initial weights) from the run folder
+    main = KINDS[args.kind].files[0]
+    return command + [main.flag, str(run_dir / named_file("last", main.roles[0]))]
 
 
 def run(command: list[str], dry_run: bool) -> int:

@@ -32,7 +32,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from envs import ProblemSpec, episode_rng, resolve_env_id, rollout
-from policies import PolicySettings
+from policies import KINDS, PolicySettings
 
 
 def reset_cost(problem, env_index: int, resets: int = 5) -> float:
@@ -63,7 +63,7 @@ def step_and_reset_cost(problem, env_index: int, steps: int) -> tuple[float, flo
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument("--environment", required=True, help="comma-separated ids, as for training")
-    parser.add_argument("--kind", choices=("static", "hebbian"), default="static")
+    parser.add_argument("--kind", choices=tuple(KINDS), default=PolicySettings.kind)
     parser.add_argument("--steps", type=int, default=1000, help="policy steps measured per environment")
     parser.add_argument("--popsize", type=int, default=200)
     parser.add_argument("--workers", type=int, default=2)

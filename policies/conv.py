@@ -28,14 +28,6 @@ other planes are work the CPU does while it waits. For other channel counts (a s
 frames), ``ordered_conv``: the same order, one tap of one channel at a time over a whole output
 row. (Where two NaNs with different payloads meet in one multiply-add, which payload comes out may
 differ from torch's; a NaN stays a NaN.)
-
-``--fast_conv`` (``fast_features``): one compiled pass over preallocated buffers, summing each
-output channel by channel with a multiply and an add (two roundings), so its features differ from
-the default's in the low bits (within about 1e-5); it too is the same on every machine. The pass
-takes each window's maximum before its tanh and computes only the 18 x 18 of conv2's 19 x 19
-outputs that the floor-mode pooling keeps. Per output pixel it sums, channel by channel, the k x k
-taps in row-major order; the taps' loops have constant bounds (``K1``, ``K2``), so they unroll and
-the loop over a row's pixels vectorises without fastmath.
 """
 
 from __future__ import annotations
@@ -108,42 +100,6 @@ def fma(typingctx, a, b, c):
 
 _FAST = dict(cache=True, nogil=True, error_model="numpy")  # numpy's: a division without Python's zero check
 
-@njit(inline="always")
-def _convolve(planes, source, weights, size, kernel_size, stride) -> None:
-    """planes (out, size, size) = the valid convolution of source (in, H, W) with weights (out, in, k, k)
-    at ``stride``, its first ``size`` rows and columns. Inlined with constant sizes (``fast_features``):
-    fixed loop lengths let the inner loops unroll (conv2 took 211 us with them read from the arrays,
-    75 us so)."""
-    for out in range(planes.shape[0]):
-        for y in range(size):
-            row = planes[out, y]
-            row[:] = 0.0
-            for channel in range(source.shape[0]):
-                kernel = weights[out, channel]
-                for x in range(size):
-                    total = row[x]
-                    for ky in range(kernel_size):
-                        for kx in range(kernel_size):
-                            total += kernel[ky, kx] * source[channel, stride * y + ky, stride * x + kx]
-                    row[x] = total
-
-
-@njit(**_FAST)
-def _tanh_of_pooled(planes: np.ndarray, pooled: np.ndarray) -> None:
-    """pooled (C, H/2, W/2) = tanh of each 2 x 2 window's maximum (``max_pool2``'s rule)."""
-    max_pool2(planes, pooled)
-    tanh_in_place(pooled)
-
-
-@njit(**_FAST)
-def fast_features(obs, conv1, conv2, planes1, pooled1, planes2, features) -> np.ndarray:
-    """The 648 features of obs (C, 84, 84) float32 into ``features``, through the buffers planes1 (6, 82, 82),
-    pooled1 (6, 41, 41), planes2 (8, 18, 18); the weights conv1 (6, C, 3, 3) and conv2 (8, 6, 5, 5)."""
-    _convolve(planes1, obs, conv1, SIZE1, K1, 1)  # (6, 82, 82)
-    _tanh_of_pooled(planes1, pooled1)
-    _convolve(planes2, pooled1, conv2, SIZE2, K2, STRIDE2)  # (8, 18, 18) of conv2's 19 x 19: what the pooling keeps
-    _tanh_of_pooled(planes2, features.reshape(planes2.shape[0], SIZE2 // 2, SIZE2 // 2))
-    return features
 
 @njit(inline="always")
 def _conv1_rows(out, frame, conv1, o, y, ky, first):
@@ -248,14 +204,12 @@ def split_phases(planes, phases) -> None:
 class ConvFeatures:
     """The 648 features of one observation (``__call__``): the same array, overwritten, at every call.
 
-    ``fast``: the compiled pass of ``--fast_conv`` (its own bits). Otherwise the default: through the
-    RGB kernels for RGB frames, through ``ordered_conv`` for other channel counts, or where
+    Through the RGB kernels for RGB frames, through ``ordered_conv`` for other channel counts, or where
     ``specialised`` is False (tests, benchmarks): the same bits either way. ``path`` says which runs:
-    "fast", "ordered" (the RGB kernels) or "general".
+    "ordered" (the RGB kernels) or "general".
     """
 
-    def __init__(self, conv_weights: np.ndarray, shapes: tuple[tuple[int, ...], ...], fast: bool = False,
-                 specialised: bool = True):
+    def __init__(self, conv_weights: np.ndarray, shapes: tuple[tuple[int, ...], ...], specialised: bool = True):
         first, second = shapes
         split = int(np.prod(first))
         weights = np.ascontiguousarray(conv_weights, dtype=np.float32)
@@ -263,11 +217,7 @@ class ConvFeatures:
         pooled1 = np.empty((first[0], POOLED1, POOLED1), np.float32)
         self._features = np.empty(second[0] * (SIZE2 // 2) ** 2, np.float32)
         pooled2 = self._features.reshape(second[0], SIZE2 // 2, SIZE2 // 2)  # conv2's 19 x 19 pools to 9 x 9
-        if fast:
-            self.path, self._forward = "fast", self._fast
-            self._buffers = (np.empty((first[0], SIZE1, SIZE1), np.float32), pooled1,
-                             np.empty((second[0], SIZE2, SIZE2), np.float32), self._features)
-        elif specialised and first[1] == RGB:
+        if specialised and first[1] == RGB:
             self.path, self._forward = "ordered", self._ordered
             self._frame = np.zeros(RGB * PIXEL_SIZE * PIXEL_SIZE + SLACK, np.float32)
             self._planes1 = np.zeros(HIDDEN * SIZE1 * WIDE1, np.float32)
@@ -287,9 +237,6 @@ class ConvFeatures:
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         return self._forward(obs)
-
-    def _fast(self, obs: np.ndarray) -> np.ndarray:
-        return fast_features(np.ascontiguousarray(obs, dtype=np.float32), *self._weights, *self._buffers)
 
     def _ordered(self, obs: np.ndarray) -> np.ndarray:
         np.copyto(self._inputs, obs, casting="unsafe")  # np.ascontiguousarray(obs, dtype=np.float32)'s values

@@ -9,7 +9,7 @@ and their loops vectorise. Compiled without fastmath, so nothing is reordered or
 
 - ``rational_tanh``: the minimax rational form Eigen and XLA use for float32, clamped where tanh rounds
   to +-1 in float32: within 4.4 ulp (2.6e-7 absolute) of tanh over all float32 inputs
-  (``benchmarks/fast_conv.py`` measures it over every float). NaN stays NaN, -0 stays -0.
+  (``benchmarks/cnn.py`` measures it over every float). NaN stays NaN, -0 stays -0.
 - ``exp32``: exp(x) = 2^n exp(r), n = round(x / ln 2), r = x - n ln 2 in two parts (Cody & Waite 1980),
   exp(r) by its Taylor polynomial of degree 7 (|r| <= 0.35: truncation below 1e-8, relative), 2^n from a
   table of exact powers of two. Within 1.2 ulp of exp where exp is a normal float32 (checked over 2 million

@@ -53,7 +53,7 @@ class HebbianPolicy(Policy):
     penalised_name = "coeffs"
 
     def __init__(self, net: NetworkSpec, rule: str = "ABCD_lr", init_weights: str = "uni",
-                 normalise: bool = True, distribution: str = "normal", fast_conv: bool = False):
+                 normalise: bool = True, distribution: str = "normal"):
         if init_weights not in INIT_CHOICES:
             raise ValueError(f"unknown --init_weights {init_weights!r}; valid values: "
                              f"{', '.join(INIT_CHOICES)}")
@@ -66,7 +66,6 @@ class HebbianPolicy(Policy):
         self.rule = get_rule(rule)
         self.init_weights = init_weights
         self.normalise = normalise
-        self.fast_conv = fast_conv  # the CNN's compiled pass (policies.conv)
         n_syn, k = net.n_synapses, self.rule.n_coeffs
         parts: list[tuple[str, tuple[int, ...]]] = [("coefficients", (n_syn, k))]
         if init_weights == COEVOLVE:
@@ -112,7 +111,7 @@ class HebbianPolicy(Policy):
     def reset(self, params: np.ndarray, rng: np.random.Generator) -> HebbianState:
         weights, conv = self.initial_weights(params, rng)
         work, out = head_buffers(self.net)
-        features = ConvFeatures(conv, self.net.conv_shapes, self.fast_conv) if conv is not None else None
+        features = ConvFeatures(conv, self.net.conv_shapes) if conv is not None else None
         return HebbianState(weights, self.fold(params), np.ones(3, dtype=np.float32), work, out, features)
 
     def act(self, params: np.ndarray, state: HebbianState, obs: np.ndarray):

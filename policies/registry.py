@@ -1,8 +1,10 @@
 """Policy kinds by name, and the settings that choose one.
 
-A new kind of network is one module that implements ``policies.base.Policy`` plus one line in
-``KINDS``: a function from (settings, network spec, whether the environment normalises plastic
-weights) to the policy. Nothing else in the project branches on the kind.
+A new kind of network is one module that implements ``policies.base.Policy`` plus one entry in
+``KINDS`` (``Kind``): a function from (settings, network spec, whether the environment normalises plastic
+weights) to the policy, whether its weights are plastic, the scripts that train and evaluate it, and the
+evaluate script's flags of its files. Nothing else in the project branches on the kind: the scripts, the
+printed commands and config.json take what they need of a kind from its entry.
 
 A front end changes what any kind reads: ``--reservoir`` puts an echo state network between the
 observation and the network (``policies.reservoir``); ``--obs_norm`` normalises what comes first.
@@ -27,20 +29,17 @@ from policies.pytorch_es import ConvLSTMPolicy, SmallNetPolicy
 from policies.reservoir import BOUNDS, MAX_UNITS, Hyperparameters, ReservoirFrontEnd, check_evolve_start, head_network
 from policies.rules import RULES
 from policies.static import StaticPolicy
-from settings import SEED_RANGE, check, setting
-
-MODERN = "beyond the original algorithm (defaults: the original)"
+from settings import MODERN, SEED_RANGE, check, setting
 
 
 @dataclass(frozen=True)
 class Network:
     build: Callable[[NetworkSpec], Policy]
     preprocessing: str = "default"  # the images it is fed: envs.recipes.PREPROCESSING
-    fast_conv: bool = False  # its CNN is the one --fast_conv computes (build takes fast_conv=True)
 
 
 NETWORKS: dict[str, Network] = {
-    "default": Network(StaticPolicy, fast_conv=True),
+    "default": Network(StaticPolicy),
     "small": Network(SmallNetPolicy),
     "lstm": Network(ConvLSTMPolicy, preprocessing="pytorch-es"),
 }
@@ -75,10 +74,6 @@ class PolicySettings:
     obs_clip: float | None = setting(None, low=0, low_open=True, requires=("obs_norm", True), metavar="C",
                                      evaluation=True, group=MODERN, shown_default="no clip",
                                      help="clip normalised observations to +-C (OpenAI: 5)")
-    fast_conv: bool = setting(False, scripts=EVALUATED, evaluation=True, group=MODERN,
-                              help="pixel networks (the default CNN) only: the CNN as one compiled pass with its own "
-                                   "summation order, equal to the default's up to float32 rounding (about 1e-5), not "
-                                   "bit for bit (docs/speed-carracing.md)")
     reservoir: bool = setting(False, scripts=EVALUATED, evaluation=True, group=RESERVOIR,
                               help="the network reads the state of a random reservoir (ER-MRL's leaky echo state "
                                    "network, reset every episode) that reads the observation; not for pixels; needs "
@@ -124,33 +119,35 @@ class PolicySettings:
 
 
 @dataclass(frozen=True)
+class FileFlag:
+    """The evaluate script's flag for one of the files a kind's policies save (``Policy.roles``)."""
+
+    flag: str  # "--path_hebb"
+    roles: tuple[str, ...]  # the roles it can give; a policy has one of them (CNN weights or co-evolved ones)
+    holds: str  # what the file holds, for --help
+
+
+@dataclass(frozen=True)
 class Kind:
+    """A kind of policy: how to build one, and what the scripts need to know of it."""
+
     build: Callable[[PolicySettings, NetworkSpec, bool], Policy]
     plastic: bool  # its weights change within an episode, so the environments' normalisation matters
+    scripts: tuple[str, str]  # its training script and its evaluate script
+    files: tuple[FileFlag, ...]  # the evaluate script's flags of its files; the first its main file (roles[0])
 
 
 KINDS: dict[str, Kind] = {
-    "static": Kind(lambda settings, net, normalise: network_of(settings).build(net, **fast_conv_option(settings)),
-                   plastic=False),
+    "static": Kind(lambda settings, net, normalise: network_of(settings).build(net), plastic=False,
+                   scripts=("train_static.py", "evaluate_static.py"),
+                   files=(FileFlag("--path_weights", ("weights",), "evolved weights"),)),
     "hebbian": Kind(lambda settings, net, normalise: HebbianPolicy(net, settings.hebb_rule, settings.init_weights,
-                                                                   normalise, settings.distribution,
-                                                                   settings.fast_conv), plastic=True),
+                                                                   normalise, settings.distribution), plastic=True,
+                    scripts=("train_hebb.py", "evaluate_hebb.py"),
+                    files=(FileFlag("--path_hebb", ("coeffs",), "Hebbian coefficients"),
+                           FileFlag("--path_coev", ("CNN_parameters", "coevolved_initial_weights"),
+                                    "CNN weights (pixel environments) or of co-evolved initial weights"))),
 }
-
-
-def fast_conv_option(settings: PolicySettings) -> dict:
-    """The keyword for ``--fast_conv`` of a network that has its CNN (``check_fast_conv`` refuses the others)."""
-    return {"fast_conv": True} if settings.fast_conv else {}
-
-
-def check_fast_conv(settings: PolicySettings, net: NetworkSpec) -> None:
-    """Refuse ``--fast_conv`` where there is no default CNN to compute."""
-    if not net.pixels:
-        raise ValueError(f"--fast_conv computes the CNN of pixel observations, but these observations are vectors "
-                         f"{net.obs_shape}; leave --fast_conv out")
-    if not network_of(settings).fast_conv:
-        raise ValueError(f"--fast_conv computes the default network's CNN, which --network {settings.network} does "
-                         "not have; leave --fast_conv out")
 
 
 def kind_of(settings: PolicySettings) -> Kind:
@@ -178,10 +175,7 @@ def make_policy(settings: PolicySettings, net: NetworkSpec, normalise: bool = Tr
     weight normalisation (docs/original.md, "Hebbian rules"), used by plastic kinds only. With ``reservoir`` the
     network reads a reservoir's state (a ValueError for pixels, or without reservoirpy). With
     ``obs_norm`` a vector-input network sees normalised observations (through the reservoir, if any);
-    a pixel network is left as it is. With ``fast_conv`` the CNN is the compiled pass (``policies.conv``;
-    a ValueError for state vectors and pytorch-es's networks)."""
-    if settings.fast_conv:
-        check_fast_conv(settings, net)
+    a pixel network is left as it is."""
     if settings.reservoir:
         policy = reservoir_front_end(settings, net, normalise)
     else:

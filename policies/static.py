@@ -63,10 +63,9 @@ class WeightFile(Policy):
 
 
 class StaticPolicy(WeightFile):
-    def __init__(self, net: NetworkSpec, fast_conv: bool = False):
+    def __init__(self, net: NetworkSpec):
         net.check_cnn_input()
         self.net = net
-        self.fast_conv = fast_conv  # the CNN's compiled pass (policies.conv)
         conv = [(f"conv{i + 1}", shape) for i, shape in enumerate(net.conv_shapes)] if net.pixels else []
         dense = [(f"fc{i + 1}", shape) for i, shape in enumerate(net.layer_shapes)]
         self.layout = Layout(conv + dense)
@@ -82,7 +81,7 @@ class StaticPolicy(WeightFile):
 
     def reset(self, params: np.ndarray, rng: np.random.Generator | None = None) -> StaticState:
         work, out = head_buffers(self.net)
-        features = (ConvFeatures(params[:self.net.conv_size], self.net.conv_shapes, self.fast_conv)
+        features = (ConvFeatures(params[:self.net.conv_size], self.net.conv_shapes)
                     if self.net.pixels else None)
         return StaticState(to_kernel_layout(params[self._head], self.net.layer_shapes), work, out, features)
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from es.loop import Reporter
 from report.plots import save_run_plot
 
 
@@ -39,7 +40,7 @@ def generation_line(row: dict) -> str:
     return line
 
 
-class GenerationLog:
+class GenerationLog(Reporter):
     """Prints one line per generation."""
 
     def __init__(self, log: Callable[[str], None] = print):
@@ -48,21 +49,9 @@ class GenerationLog:
     def generation(self, row: dict) -> None:
         self.log(generation_line(row))
 
-    def saved(self, folder, rows: list[dict]) -> None:
-        pass
 
-    def close(self) -> None:
-        pass
-
-
-class FitnessPlot:
+class FitnessPlot(Reporter):
     """Redraws the run's ``fitness.png`` at every save."""
-
-    def generation(self, row: dict) -> None:
-        pass
 
     def saved(self, folder, rows: list[dict]) -> None:
         folder.write(save_run_plot, "fitness.png", rows, folder.name)
-
-    def close(self) -> None:
-        pass

@@ -1,9 +1,13 @@
-"""Videos of evaluation episodes, written frame by frame as the environment renders them.
+"""Videos of evaluation episodes, written frame by frame as the environment renders them, or strips of frames.
 
 The frames go to the file as they come (an H.264 mp4 through imageio's ffmpeg), so a long episode
 never accumulates in memory; they go to a temporary file, renamed over the target when it closes;
 odd frame sizes are padded to even ones, as the codec needs. While a
 terminal watches, a progress line counts the frames written.
+
+A ``.png`` path gets a strip instead: every ``STRIP_EVERY``-th frame of the episode (the first and
+then one every few seconds of play), at half size, ``STRIP_COLUMNS`` to a row, in one picture for a
+page (only those frames are kept in memory).
 """
 
 from __future__ import annotations
@@ -18,7 +22,8 @@ import numpy as np
 
 from es.files import _FILE_MODE
 
-VIDEO_SUFFIXES = (".mp4", ".mkv", ".mov", ".avi")  # containers ffmpeg writes H.264 into
+VIDEO_SUFFIXES = (".mp4", ".mkv", ".mov", ".avi", ".png")  # containers ffmpeg writes H.264 into; a strip
+STRIP_EVERY, STRIP_COLUMNS = 100, 5
 
 
 class VideoRecorder(gym.Wrapper):
@@ -32,6 +37,7 @@ class VideoRecorder(gym.Wrapper):
         self._progress = None
         self._recording = False
         self._recorded = False
+        self._strip: list[np.ndarray] | None = [] if self.path.suffix.lower() == ".png" else None
 
     def reset(self, **kwargs):
         result = self.env.reset(**kwargs)
@@ -55,6 +61,11 @@ class VideoRecorder(gym.Wrapper):
         if frame is None:
             return
         frame = np.asarray(frame)[..., :3]
+        if self._strip is not None:
+            if self.frames_written % STRIP_EVERY == 0:
+                self._strip.append(np.ascontiguousarray(frame[::2, ::2]))
+            self.frames_written += 1
+            return
         if self._writer is None:
             self._open(frame.shape)
         self._writer.append_data(np.pad(frame, self._pad))
@@ -82,6 +93,9 @@ class VideoRecorder(gym.Wrapper):
 
     def finish(self) -> None:
         """Close the file (also after an interrupted episode: what was recorded is kept)."""
+        if self._strip:
+            write_strip(self.path, self._strip)
+            self._strip = []
         if self._progress is not None:
             self._progress.close()
             self._progress = None
@@ -94,6 +108,26 @@ class VideoRecorder(gym.Wrapper):
     def close(self) -> None:
         self.finish()
         super().close()
+
+
+def write_strip(path: Path, frames: list[np.ndarray]) -> None:
+    """``frames`` (equal shapes) in rows of ``STRIP_COLUMNS``, the last row's gaps white, as a PNG."""
+    import io
+
+    from PIL import Image
+
+    from es.files import atomic_write_bytes
+
+    height, width, _ = frames[0].shape
+    rows = -(-len(frames) // STRIP_COLUMNS)
+    columns = min(len(frames), STRIP_COLUMNS)
+    picture = np.full((rows * height, columns * width, 3), 255, dtype=np.uint8)
+    for index, frame in enumerate(frames):
+        row, column = divmod(index, STRIP_COLUMNS)
+        picture[row * height:(row + 1) * height, column * width:(column + 1) * width] = frame
+    buffer = io.BytesIO()
+    Image.fromarray(picture).save(buffer, format="PNG")
+    atomic_write_bytes(path, buffer.getvalue())
 
 
 def record_first_episode(problem, path: str | Path) -> VideoRecorder:

@@ -19,6 +19,8 @@ EXTRAS = {
     "ray": ("ray",),
     "atari": ("ale_py",),
     "tensorboard": ("tensorboard",),
+    "wandb": ("wandb",),
+    "mlflow": ("mlflow", "sqlalchemy", "alembic"),
     "strategies": ("cmaes",),
     "stats": ("rliable", "arch", "pandas"),
     "bench": ("evotorch",),

@@ -432,7 +432,7 @@ CASES = {
         "the static+reservoir arm: --reservoir draws ER-MRL's reservoirs with reservoirpy, which is not installed",
         prepare=hidden_reservoirpy, env={"PYTHONPATH": "hidden"}),
     "paper.py --dry-run with a bad value": Case(lambda run, work: ["experiments/paper.py", "ant", "static", "--dry-run",
-                                                                   "--popsize", "1"], "--popsize must be at least 2"),
+                                                                   "--popsize", "1"], "--popsize must be a whole"),
     "paper.py on a folder with other settings": Case(
         lambda run, work: ["experiments/paper.py", "ant", "static", "--dry-run", "--popsize", "8", "--folder",
                            str(work)],

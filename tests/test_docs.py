@@ -61,13 +61,26 @@ EXTRAS = {
     "atari": (("ale_py",), lambda script, args: any(re.search(r"ALE/|NoFrameskip|Deterministic-v|pong", word)
                                                      for word in args)),
     "tensorboard": (("tensorboard",),
-                    lambda script, args: "--tensorboard" in args or script.startswith("scripts/test")),
+                    lambda script, args: "--tensorboard" in args or "tensorboard" in logged(args)
+                    or script.startswith("scripts/test")),
+    "wandb": (("wandb",), lambda script, args: "wandb" in logged(args)),
+    "mlflow": (("mlflow", "sqlalchemy", "alembic"), lambda script, args: "mlflow" in logged(args)),
     "strategies": (("cmaes",), lambda script, args: "cma_es" in args or "sep_cma_es" in args),
     "stats": (("rliable", "arch", "pandas"),
               lambda script, args: script.endswith("report_runs.py")
               or (script.endswith("paper.py") and "report" in args)),
     "bench": (("evotorch",), lambda script, args: "evotorch" in Path(script).name),
 }
+
+
+def logged(args: list[str]) -> list[str]:
+    """The trackers a command's --logger names."""
+    if "--logger" not in args:
+        return []
+    following = args[args.index("--logger") + 1:]
+    return following[:next((i for i, word in enumerate(following) if word.startswith("--")), len(following))]
+
+
 # budgets: flag -> tiny value
 SHRINK = {"--generations": "1", "--popsize": "2", "--episodes": "1", "--eval_episodes": "1", "--eval_every": "1",
           "--training_steps": "64", "--training_timesteps": "64", "--HP_training_steps": "64", "--nb_trials": "1",

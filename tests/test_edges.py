@@ -222,6 +222,36 @@ def test_the_video_holds_every_frame_of_the_first_episode(tmp_path, weights):
     assert imageio.mimread(video, memtest=False).__len__() == steps + 1  # the reset's frame, then one per step
 
 
+def test_a_png_video_is_a_strip_of_every_hundredth_frame(tmp_path):
+    """A CartPole episode of up to 240 steps (the reset's frame, then one per step): frames 0, 100, 200, ...
+    at half size, side by side, the same pixels as the episode rendered again from the same seed."""
+    import gymnasium as gym
+    from PIL import Image
+
+    from report.video import STRIP_EVERY, VideoRecorder
+
+    def episode(env):  # a controller that keeps the pole up: the whole 240 steps
+        observation, _ = env.reset(seed=4)
+        rendered = [env.render()]
+        for _ in range(240):
+            observation, _, terminated, truncated, _ = env.step(int(observation[2] + 0.5 * observation[3] > 0))
+            rendered.append(env.render())
+            if terminated or truncated:
+                break
+        return rendered
+
+    recorder = VideoRecorder(gym.make("CartPole-v1", render_mode="rgb_array", max_episode_steps=240),
+                             tmp_path / "strip.png")
+    rendered = episode(recorder)
+    recorder.close()
+    picture = np.asarray(Image.open(tmp_path / "strip.png"))
+    kept = rendered[0::STRIP_EVERY]
+    height, width = rendered[0].shape[0] // 2, rendered[0].shape[1] // 2
+    assert len(kept) >= 2 and picture.shape == (height, len(kept) * width, 3)
+    for index, frame in enumerate(kept):
+        np.testing.assert_array_equal(picture[:, index * width:(index + 1) * width], frame[::2, ::2, :3])
+
+
 # --- 8. headless MuJoCo without a GL library ---------------------------------------------------------
 
 

@@ -7,6 +7,12 @@ Skipped where the optional extra is not installed (pip install -r requirements-r
 
 from __future__ import annotations
 
+import os
+import platform
+import subprocess
+import sys
+from pathlib import Path
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -26,7 +32,8 @@ from reservoirs.wrappers import (  # noqa: E402
     ReservoirWrapper,
     RewardsSavingWrapper,
 )
-from tests import reservoirpy03_fixture as fixture  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
 
 SETTINGS = ReservoirSettings(units=50, leak_rate=0.3, spectral_radius=1.7, input_scaling=2.5)
 
@@ -46,19 +53,35 @@ def plain_loop(weights, input_weights, bias, leak_rate, inputs, reset_after=None
 # --- the echo state network -----------------------------------------------------------------------
 
 
+REPRODUCE_0_3 = """
+import numpy as np
+from reservoirs.esn import EchoStateNetwork, ReservoirSettings
+from tests import reservoirpy03_fixture as fixture
+
+expected = np.load(fixture.FIXTURE)
+settings = ReservoirSettings(fixture.UNITS, fixture.LEAK_RATE, fixture.SPECTRAL_RADIUS, fixture.INPUT_SCALING)
+network = EchoStateNetwork(fixture.INPUT_DIM, settings, fixture.SEED)
+for matrix, name in zip(network.matrices(), ("W", "Win", "bias")):
+    np.testing.assert_array_equal(matrix, expected[name])
+states = []
+for step, row in enumerate(fixture.inputs()):
+    states.append(network.step(row))
+    if step == fixture.RESET_AFTER:
+        network.reset()
+np.testing.assert_array_equal(np.array(states), expected["states"])
+"""
+
+
 def test_reproduces_reservoirpy_0_3_bit_for_bit():
-    """The matrices and states reservoirpy 0.3.9.post1 (ER-MRL's version) computed for the same reservoir."""
-    expected = np.load(fixture.FIXTURE)
-    settings = ReservoirSettings(fixture.UNITS, fixture.LEAK_RATE, fixture.SPECTRAL_RADIUS, fixture.INPUT_SCALING)
-    network = EchoStateNetwork(fixture.INPUT_DIM, settings, fixture.SEED)
-    for matrix, name in zip(network.matrices(), ("W", "Win", "bias")):
-        np.testing.assert_array_equal(matrix, expected[name])
-    states = []
-    for step, row in enumerate(fixture.inputs()):
-        states.append(network.step(row))
-        if step == fixture.RESET_AFTER:
-            network.reset()
-    np.testing.assert_array_equal(np.array(states), expected["states"])
+    """The matrices and states reservoirpy 0.3.9.post1 (ER-MRL's version) computed for the same reservoir, with
+    the BLAS kernel it was computed with (OpenBLAS's Haswell one): the spectral radius that scales W comes from
+    an eigensolver whose last bits follow the BLAS kernel (docs/reproducibility.md), so the check runs in a
+    process that asks for that kernel, on any x86-64 CPU with AVX2."""
+    if platform.machine() not in ("x86_64", "AMD64"):
+        pytest.skip("the fixture was computed with OpenBLAS's x86-64 Haswell kernel")
+    result = subprocess.run([sys.executable, "-c", REPRODUCE_0_3], cwd=ROOT, capture_output=True, text=True,
+                            timeout=120, env={**os.environ, "OPENBLAS_CORETYPE": "Haswell"})
+    assert result.returncode == 0, result.stderr[-3000:]
 
 
 @pytest.mark.parametrize("leak_rate", [0.3, 1.0])

@@ -65,7 +65,7 @@ def test_refusals_name_the_problem(tmp_path):
     assert other.stderr.strip().splitlines() == [
         (f"seeds.py: error: {folder} holds a launch with other settings: --popsize 8 (the launch has 4); give the "
         "same settings to resume it (only --generations, --print_every, --threads, --backend, --ray_address, "
-        "--tensorboard may change) or use another --folder")]
+        "--logger, --wandb_project, --mlflow_uri, --mlflow_experiment may change) or use another --folder")]
     kind = launch("--", "train_hebb.py", "--environment", "CartPole-v1", "--folder", str(folder))
     assert kind.returncode == 2 and "holds a launch of train_static.py, not train_hebb.py" in kind.stderr
     seed = launch("--", *TRAINING, "--seed", "3", "--folder", str(tmp_path / "new"))

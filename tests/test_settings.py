@@ -127,6 +127,30 @@ def test_a_previous_versions_run_resumes_to_its_numbers_and_records_only_its_kin
         assert "network" not in policy and policy["hebb_rule"] == "A"
 
 
+@pytest.mark.parametrize("fast_conv", [False, True])
+def test_a_run_that_recorded_the_retired_fast_conv_resumes_and_evaluates(fast_conv, tmp_path):
+    """config.json files of the versions with --fast_conv (issue 31, removed by issue 41) record it; such a run
+    is read as today's (the default CNN, for pixels): it evaluates and resumes to today's numbers."""
+    run_dir = copy_run("static", tmp_path)
+    config = json.loads((run_dir / "config.json").read_text())
+    config["policy"]["fast_conv"] = fast_conv
+    (run_dir / "config.json").write_text(json.dumps(config, indent=2))
+    assert returns(evaluate_static, tmp_path, "--path_weights", run_dir) == RECORDED["static"][0]
+    code, out, err = main(train_static, "--resume", run_dir, "--generations", 3)
+    assert code == 0, out + err
+    assert hashlib.sha256(load_dat(run_dir / "last.dat").tobytes()).hexdigest() == RECORDED["static"][1]
+    assert "fast_conv" not in json.loads((run_dir / "config.json").read_text())["policy"]
+
+
+def test_a_run_that_recorded_tensorboard_as_a_run_setting_logs_to_tensorboard():
+    """Until issue 41 TensorBoard was the run's setting ``tensorboard``; such a config.json reads as --logger."""
+    config = json.loads((RUNS / "static" / "config.json").read_text())
+    assert "log" not in config and config["run"]["tensorboard"] is False
+    assert TrainConfig.from_dict(config).log.logger == ()
+    config["run"]["tensorboard"] = True
+    assert TrainConfig.from_dict(config).log.logger == ("tensorboard",)
+
+
 # --- config.json ---------------------------------------------------------------------------------------
 
 
@@ -241,7 +265,8 @@ def test_the_original_flags_are_all_there():
 
 def test_resumable_and_requires_come_from_the_declarations(tmp_path):
     resumable = {item.name for item in declared() if item.spec.resumable}
-    assert resumable == {"generations", "threads", "backend", "ray_address", "print_every", "tensorboard"}
+    assert resumable == {"generations", "threads", "backend", "ray_address", "print_every", "logger", "wandb_project",
+                         "mlflow_uri", "mlflow_experiment"}
     run_dir = copy_run("static", tmp_path)
     code, _, err = main(train_static, "--resume", run_dir, "--lr", "0.3", "--generations", 3)
     one_line(code, err, "--lr 0.3 (the run has 0.2)", "only --generations, --print_every, --threads")

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -30,7 +31,7 @@ import train_hebb
 import train_static
 from envs import ProblemSpec
 from envs.problem import Problem
-from es.files import load_dat
+from es.files import load_dat, read_metrics
 from es.loop import Trainer
 from es.noise import NoiseTable
 from es.runfolder import Checkpoint, History, RunFolder
@@ -39,9 +40,11 @@ from es.strategies import STRATEGIES, make_strategy
 from es.strategies.cma import check_covariance_fits
 from es.strategies.pgpe import PGPE, clipup_velocity
 from es.strategies.snes import default_sigma_lr
+from es.strategy import StrategySettings
 from es.worker import perturb
 from policies.network import Layout
 from policies.static import WeightFile
+from settings import options
 from tests.extras import need
 from tests.run_helpers import assert_same_checkpoint_and_metrics, only_run
 
@@ -104,6 +107,32 @@ def test_a_population_is_what_the_wire_protocol_can_carry(name):
         np.testing.assert_array_equal(population.signs, np.tile([1, -1], 4))
     if population.scale is not None:
         assert population.scale.shape == (12,) and population.scale.dtype == np.float32
+
+
+@pytest.mark.parametrize("name", list(STRATEGIES))
+def test_a_strategy_owns_its_settings_and_its_population_rule(name):
+    """Its settings class declares only settings that require it (so that they are flags of its runs only), and
+    its population rule is what its populations do: mirrored pairs need an even --popsize, refused when odd."""
+    needs_extra(name)
+    entry = STRATEGIES[name]
+    shared = {item.name for item in options(StrategySettings)}
+    own = [item for item in options(entry.settings) if item.name not in shared]
+    for item in own:  # each requires the strategy, or another of its own settings (Adam's betas: --optimizer adam)
+        pairs = item.spec.requires if isinstance(item.spec.requires[0], tuple) else (item.spec.requires,)
+        assert ("strategy", name) in pairs or pairs[0][0] in {other.name for other in own}, item.name
+    assert issubclass(ESSettings, entry.settings)
+    population = make_strategy(settings_for(name), 12).ask(
+        make_strategy(settings_for(name), 12).initial_state(np.zeros(12, np.float32)), np.random.default_rng(0),
+        NoiseTable.create(seed=1, size=4096))
+    assert population.mirrored == entry.pairs
+    if entry.pairs:
+        with pytest.raises(ValueError, match=f"^--popsize 7 is odd, but --strategy {name} samples mirrored pairs; "
+                                             "give an even --popsize such as 6 or 8$"):
+            settings_for(name, popsize=7)
+    else:
+        assert len(make_strategy(settings_for(name, popsize=7), 12).ask(
+            make_strategy(settings_for(name, popsize=7), 12).initial_state(np.zeros(12, np.float32)),
+            np.random.default_rng(0), NoiseTable.create(seed=1, size=4096)).indices) == 7
 
 
 @pytest.mark.parametrize("name", list(STRATEGIES))
@@ -563,6 +592,26 @@ def refused(kind: str, *argv: str) -> str:
 def test_strategy_flags_are_checked_in_one_line(argv, message, tmp_path):
     assert message in refused("static", *TINY, *argv, "--folder", str(tmp_path))
     assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("name", [name for name, entry in STRATEGIES.items() if entry.pairs])
+def test_a_strategy_of_mirrored_pairs_refuses_an_odd_population_in_one_line(name, tmp_path):
+    line = refused("static", "--environment", "CartPole-v1", "--strategy", name, "--popsize", "5", "--folder",
+                   str(tmp_path))
+    assert line == (f"train_static.py: error: --popsize 5 is odd, but --strategy {name} samples mirrored pairs; give "
+                    "an even --popsize such as 4 or 6")
+    assert not any(tmp_path.iterdir())
+
+
+def test_snes_runs_the_population_given_odd_or_not(tmp_path):
+    """``--strategy snes --popsize 5``: 5 members (and the centre) per generation, as recorded and counted."""
+    script("static", "--environment", "CartPole-v1", "--strategy", "snes", "--popsize", "5", "--generations", "2",
+           "--seed", "3", "--threads", "1", "--folder", str(tmp_path))
+    run = only_run(tmp_path)
+    assert json.loads((run / "config.json").read_text())["es"]["popsize"] == 5
+    rows = read_metrics(run / "metrics.csv")
+    assert len(rows) == 2 and all(1 <= int(row["center_rank"]) <= 6 for row in rows)  # of the 5 members + 1
+    assert len(list(run.glob("CartPole-v1__rew_*__pop_5__*.dat"))) == 2
 
 
 def test_full_cma_es_on_a_large_network_is_refused_naming_sep_cma_es(tmp_path, monkeypatch):

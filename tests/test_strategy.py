@@ -15,9 +15,10 @@ from es.noise import NoiseTable
 from es.settings import ESSettings
 from es.shaping import centered_ranks, l2_penalty, penalised_fitness, standardise
 from es.shaping import rank_std as shape_fitness
-from es.strategy import ESState, OpenES, Population
-from es.strategy import decay_lr as decay_lr_with
-from es.strategy import decay_sigma as decay_sigma_with
+from es.strategies.openai import OpenES
+from es.strategies.openai import decay_lr as decay_lr_with
+from es.strategies.openai import decay_sigma as decay_sigma_with
+from es.strategy import ESState, Population
 
 DEFAULTS = ESSettings()
 

@@ -1,45 +1,38 @@
-"""The registry of strategies: ``--strategy`` name -> factory ``(ESSettings, number of parameters) ->
-Strategy`` (the ask/tell interface of ``es.strategy``). The loop (``es.loop.Trainer``) knows a
-strategy only through that interface.
+"""The registry of strategies: ``--strategy`` name -> ``StrategyEntry`` (``es.strategy``: the factory
+``(settings, number of parameters) -> Strategy``, the strategy's settings, its population rule). The loop
+(``es.loop.Trainer``) knows a strategy only through the ask/tell interface.
 
-    openai      OpenAI-ES, the original's (Salimans et al. 2017; ``es.strategy``)
+    openai      OpenAI-ES, the original's (Salimans et al. 2017)
     pgpe        PGPE with symmetric sampling and ClipUp (Sehnke et al. 2010; Toklu et al. 2020)
     snes        separable NES (Schaul et al. 2011; Wierstra et al. 2014)
     cma_es      CMA-ES (Hansen 2016), through the ``cmaes`` library (optional extra)
     sep_cma_es  separable CMA-ES (Ros & Hansen 2008), through the ``cmaes`` library (optional extra)
     ars         augmented random search, V1-t and V2-t (Mania et al. 2018)
 
-Adding a strategy: one module with a factory, one entry here, and its settings as fields of
-``es.settings.ESSettings`` (each ``setting()`` requiring its strategy). ``tests/test_strategies.py``
-runs every entry. Nothing here imports ``es.settings`` (it imports this registry for its choices).
+Adding a strategy: its module (the strategy, its settings class, its ``StrategyEntry``) and one line
+here; ``es.settings.ESSettings`` takes its settings from the entry, and ``tests/test_strategies.py``
+runs every entry.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from es.strategies import ars, cma, openai, pgpe, snes
+from es.strategy import Strategy, StrategyEntry
 
-from es.strategies import ars, cma, pgpe, snes
-from es.strategies.pgpe import PGPE_OPTIMIZERS
-from es.strategy import ESSettings, OpenES, Strategy
-
-
-def _openai(settings: ESSettings, dim: int) -> Strategy:
-    return OpenES(settings)
-
-
-STRATEGIES: dict[str, Callable[[ESSettings, int], Strategy]] = {
-    "openai": _openai,
-    "pgpe": pgpe.make,
-    "snes": snes.make,
-    "cma_es": cma.make_full,
-    "sep_cma_es": cma.make_separable,
-    "ars": ars.make,
+STRATEGIES: dict[str, StrategyEntry] = {
+    "openai": openai.STRATEGY,
+    "pgpe": pgpe.STRATEGY,
+    "snes": snes.STRATEGY,
+    "cma_es": cma.FULL,
+    "sep_cma_es": cma.SEPARABLE,
+    "ars": ars.STRATEGY,
 }
 
 
-def make_strategy(settings: ESSettings, dim: int) -> Strategy:
-    """The strategy ``settings.strategy`` names, for ``dim`` parameters (ESSettings has checked the name)."""
-    return STRATEGIES[settings.strategy](settings, dim)
+def make_strategy(settings, dim: int) -> Strategy:
+    """The strategy ``settings.strategy`` names, for ``dim`` parameters (``es.settings.ESSettings``, which has
+    checked the name and the strategy's rules)."""
+    return STRATEGIES[settings.strategy].make(settings, dim)
 
 
-__all__ = ["PGPE_OPTIMIZERS", "STRATEGIES", "make_strategy"]
+__all__ = ["STRATEGIES", "make_strategy"]

@@ -29,7 +29,7 @@ import os
 import numpy as np
 
 from es.noise import NoiseTable
-from es.strategy import ESSettings, ESState, Population, check_fitness
+from es.strategy import ESState, Population, StrategyEntry, StrategySettings, check_fitness
 
 INSTALL_HINT = "pip install -r requirements-strategies.txt (or pip install -e .[strategies])"
 STATE = ("_mean", "_sigma", "_C", "_p_sigma", "_pc", "_g", "_funhist_values")  # what tell() changes
@@ -129,12 +129,16 @@ def check_covariance_fits(popsize: int, dim: int, memory: int | None = None) -> 
                          "covariance, linear in the parameters)")
 
 
-def make_full(settings: ESSettings, dim: int) -> LibraryCMA:
+def make_full(settings: StrategySettings, dim: int) -> LibraryCMA:
     check_covariance_fits(settings.popsize, dim)
     return LibraryCMA("cma_es", settings.popsize, settings.sigma, separable=False)
 
 
-def make_separable(settings: ESSettings, dim: int) -> LibraryCMA:
+def make_separable(settings: StrategySettings, dim: int) -> LibraryCMA:
     if dim < 2:
         raise ValueError(f"--strategy sep_cma_es needs at least 2 parameters, this policy has {dim}")
     return LibraryCMA("sep_cma_es", settings.popsize, settings.sigma, separable=True)
+
+
+# the library samples its members (no pairs, no settings of their own)
+FULL, SEPARABLE = StrategyEntry(make_full), StrategyEntry(make_separable)

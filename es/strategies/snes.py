@@ -27,7 +27,19 @@ import numpy as np
 
 from es import exact
 from es.noise import NoiseTable
-from es.strategy import ESSettings, ESState, Population, check_fitness
+from es.strategy import STRATEGY_GROUP, ESState, Population, StrategyEntry, StrategySettings, check_fitness
+from settings import setting
+
+WITH_SNES = ("strategy", "snes")  # what each of its settings requires
+
+
+@dataclass(frozen=True)
+class SNESSettings(StrategySettings):
+    snes_lr: float = setting(1.0, low=0, low_open=True, requires=WITH_SNES, group=STRATEGY_GROUP,
+                             help="SNES: the centre's learning rate (the paper's 1)")
+    snes_sigma_lr: float | None = setting(None, low=0, low_open=True, requires=WITH_SNES, group=STRATEGY_GROUP,
+                                          shown_default="(3 + ln d) / (5 sqrt d), d the parameters",
+                                          help="SNES: sigma's learning rate")
 
 
 def default_sigma_lr(dim: int) -> float:
@@ -88,6 +100,9 @@ class SNES:
         return new_state, {"update_factor": self.lr, "skipped": weights is None}
 
 
-def make(settings: ESSettings, dim: int) -> SNES:
+def make(settings: SNESSettings, dim: int) -> SNES:
     sigma_lr = settings.snes_sigma_lr if settings.snes_sigma_lr is not None else default_sigma_lr(dim)
     return SNES(settings.popsize, settings.sigma, settings.snes_lr, sigma_lr)
+
+
+STRATEGY = StrategyEntry(make, SNESSettings)  # members sampled independently: any population

@@ -1,22 +1,20 @@
 #!/usr/bin/env python
-"""The pixel CNN: the original's as torch computes it, the default (``policies.conv``'s ordered kernels and
-the project's tanh) and ``--fast_conv``'s compiled pass, in one run.
+"""The pixel CNN: the original's as torch computes it and the project's (``policies.conv``'s ordered kernels
+and the project's tanh), in one run.
 
-    python benchmarks/fast_conv.py
+    python benchmarks/cnn.py
 
-- per frame: the three paths on the same real CarRacing-v3 observations and the same weights, one
-  thread, CPU time of this process, alternating round by round; the medians over ``--rounds``; and
-  whether two instances of the default give the same bits on every frame;
+- per frame: both paths on the same real CarRacing-v3 observations and the same weights, one thread,
+  CPU time of this process, alternating round by round; the medians over ``--rounds``; and whether two
+  instances of the project's give the same bits on every frame;
 - the features: the largest difference between the two paths on those frames, for PyTorch's default
   initialisation (the static network's generation 0) and N(0, 1) (the Hebbian network's CNN);
 - tanh: the largest error of the project's rational tanh against ``math.tanh`` (double), and how
-  often it steps down, over every ``--tanh_every``-th float32 of [0, 8] (1: all of them);
-- outputs: the static and the Hebbian networks' outputs on those frames, in order, with and without it;
-- returns: one static and one Hebbian parameter vector (generation-0 draws, fixed seeds) evaluated
-  with and without the flag on the same ``--episodes`` seeds, episodes capped at ``--steps``.
+  often it steps down, over every ``--tanh_every``-th float32 of [0, 8] (1: all of them).
 
 Each run writes its record to benchmarks/results/ (benchmarks/record.py): the times per frame and their
-ratios round by round, the differences as notes.
+ratio round by round, the differences as notes. (Until issue 41 it also measured ``--fast_conv``, a
+compiled pass summing in another order; by then the default was faster per frame, and the flag went.)
 """
 
 from __future__ import annotations
@@ -35,7 +33,7 @@ from record import Record, add_results_flag
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from cli.flags import positive_int
-from envs import ProblemSpec, rollout
+from envs import ProblemSpec
 from policies import PolicySettings
 from policies.conv import ConvFeatures
 from policies.elementary import rational_tanh
@@ -99,8 +97,7 @@ def per_frame(features, frames: list[np.ndarray]) -> float:
 
 def speed(record: Record, frames: list[np.ndarray], rounds: int) -> None:
     weights = conv_weights("default", 1)
-    paths = {"torch": TorchCNN(weights), "default": ConvFeatures(weights, SHAPES),
-             "fast": ConvFeatures(weights, SHAPES, fast=True)}
+    paths = {"torch": TorchCNN(weights), "default": ConvFeatures(weights, SHAPES)}
     for features in paths.values():
         per_frame(features, frames[:1])  # compiled (or loaded from numba's cache) before timing
     again = ConvFeatures(weights, SHAPES)
@@ -110,30 +107,25 @@ def speed(record: Record, frames: list[np.ndarray], rounds: int) -> None:
     for _ in range(rounds):
         for name, features in paths.items():
             times[name].append(per_frame(features, frames))
-    torch_us, default_us, fast_us = (statistics.median(times[name]) * 1e6 for name in paths)
+    torch_us, default_us = (statistics.median(times[name]) * 1e6 for name in paths)
     for name in paths:
         record.add(f"{name}_per_frame", f"the CNN's {name} path, CPU time per CarRacing frame", "us",
                    [seconds * 1e6 for seconds in times[name]])
-    for name in ("default", "fast"):
-        record.add(f"{name}_against_torch", f"the CNN's {name} path against torch's, per frame", "x",
-                   [torch / other for torch, other in zip(times["torch"], times[name])])
+    record.add("default_against_torch", "the CNN's default path against torch's, per frame", "x",
+               [torch / other for torch, other in zip(times["torch"], times["default"])])
     record.note("default_same_bits_twice", same)
     print(f"per frame ({len(frames)} CarRacing frames, median of {rounds} rounds): torch {torch_us:.0f} us; "
           f"the default ({paths['default'].path}) {default_us:.0f} us, {torch_us / default_us:.2f}x, the same bits "
-          f"twice on every frame: {same}; --fast_conv {fast_us:.0f} us, {torch_us / fast_us:.2f}x")
+          f"twice on every frame: {same}")
 
 
 def differences(record: Record, frames: list[np.ndarray]) -> None:
     for kind in ("default", "normal"):
         weights = conv_weights(kind, 2)
-        paths = TorchCNN(weights), ConvFeatures(weights, SHAPES), ConvFeatures(weights, SHAPES, fast=True)
-        torch_path, default, fast = paths
+        torch_path, default = TorchCNN(weights), ConvFeatures(weights, SHAPES)
         largest = max(float(np.abs(torch_path(frame) - default(frame)).max()) for frame in frames)
-        fast_largest = max(float(np.abs(default(frame) - fast(frame)).max()) for frame in frames)
-        record.note(f"features_{kind}_weights", {"largest_torch_minus_default": largest,
-                                                 "largest_default_minus_fast": fast_largest})
-        print(f"features, {kind} weights, over {len(frames)} frames: largest |torch - default| {largest:.2e}, "
-              f"|default - fast| {fast_largest:.2e}")
+        record.note(f"features_{kind}_weights", {"largest_torch_minus_default": largest})
+        print(f"features, {kind} weights, over {len(frames)} frames: largest |torch - default| {largest:.2e}")
 
 
 @njit(cache=True)
@@ -161,53 +153,15 @@ def tanh_error(every: int) -> tuple[float, float, float, float, int]:
     return largest, at, largest_ulp, at_ulp, decreases
 
 
-def actions(frames: list[np.ndarray]) -> None:
-    """The networks' outputs on the same sequence of frames, with and without the flag (the Hebbian
-    network's weights change along it, so differences could grow)."""
-    for kind in ("static", "hebbian"):
-        outputs = []
-        for fast in (False, True):
-            problem = ProblemSpec(("CarRacing-v3",), PolicySettings(kind, fast_conv=fast)).build()
-            try:
-                policy = problem.policy
-                params = policy.initial_params(np.random.default_rng(7))
-                state = policy.reset(params, np.random.default_rng(8))
-                outputs.append(np.array([policy.act(params, state, frame)[0].copy() for frame in frames]))
-            finally:
-                problem.close()
-        print(f"{kind} network's outputs over the {len(frames)} frames: largest |default - fast| "
-              f"{np.abs(outputs[0] - outputs[1]).max():.2e} (outputs up to {np.abs(outputs[0]).max():.2f})")
-
-
-def returns(episodes: int, steps: int) -> None:
-    for kind in ("static", "hebbian"):
-        line = []
-        for fast in (False, True):
-            settings = PolicySettings(kind, fast_conv=fast)
-            problem = ProblemSpec(("CarRacing-v3",), settings, max_episode_steps=steps).build()
-            try:
-                params = problem.policy.initial_params(np.random.default_rng(7))
-                line.append([rollout(problem.envs[0], problem.policy, params, seed) for seed in range(episodes)])
-            finally:
-                problem.close()
-        print(f"{kind}, {episodes} episodes of up to {steps} steps, seeds 0..{episodes - 1}, return (steps):")
-        for name, episodes_run in zip(("default", "fast"), line, strict=True):
-            print(f"  {name:6}" + " ".join(f"{episode.total_return:.4f} ({episode.steps})" for episode in episodes_run))
-        largest = max(abs(a.total_return - b.total_return) for a, b in zip(*line, strict=True))
-        print(f"  largest |difference| {largest:.2e}")
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=positive_int, default=5)
     parser.add_argument("--frames", type=positive_int, default=300, help="CarRacing frames timed per path and round")
-    parser.add_argument("--episodes", type=positive_int, default=3, help="episodes per network and path")
-    parser.add_argument("--steps", type=positive_int, default=300, help="the episodes' cap")
     parser.add_argument("--tanh_every", type=positive_int, default=64,
                         help="1: every float32 of [0, 8] for the rational tanh (about a minute)")
     add_results_flag(parser)
     args = parser.parse_args()
-    record = Record("fast_conv")
+    record = Record("cnn")
     frames = observations(args.frames)
     speed(record, frames, args.rounds)
     differences(record, frames)
@@ -217,8 +171,6 @@ def main() -> None:
     checked = "every float32" if args.tanh_every == 1 else f"every {args.tanh_every}th float32"
     print(f"tanh on {checked} of [0, 8]: largest error {largest:.2e} (at x = {at:.6g}), {ulps:.1f} ulp "
           f"(at x = {at_ulp:.6g}); decreasing steps: {decreases}")
-    actions(frames)
-    returns(args.episodes, args.steps)
     record.write(args.results)
 
 

@@ -1,0 +1,88 @@
+"""What a logger is (``--logger``, ``report.loggers``): one module that sends a run to an experiment
+tracker, and declares to the registry how it is made, what it needs installed and its own settings.
+
+A logger (``Logger``) receives, in this order:
+
+- ``begin(record, generation)``: the run's settings once, as config.json records them (the sections,
+  the command, the versions, the parameter count), when the run starts (generation 0) or resumes after
+  its checkpoint's generation; it returns what config.json should record of it, such as its tracker's
+  run id, so that a resumed run continues the same tracker run;
+- ``log(step, values)``: every row that goes to metrics.csv, its numeric, finite columns (``scalars``),
+  with the generation as the step. A resumed run recomputes only the generations after its checkpoint,
+  and a logger that finds its tracker already holding one of them (a run stopped between two saves)
+  sends it no second time;
+- ``flush()`` at every save of the run's files;
+- ``artefacts(figures, weights)`` once the run has run all its generations: its figures (``fitness.png``)
+  and its final weight files (``last*`` and ``best*``: the .dat files and observation statistics);
+- ``close(finished)`` when the process ends, finished or not.
+
+Its entry (``LoggerEntry``): the factory, the modules it imports (checked before anything starts: a
+missing one is refused in one line with its install command) and the extra that installs them
+(``requirements-<extra>.txt``), and its settings: a frozen dataclass subclassing ``LoggerSettings``
+whose fields, made with ``settings.setting()``, each require ``--logger <its name>``.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
+
+from es.files import METRICS_COLUMNS
+
+GROUP = "experiment trackers (--logger)"  # --help's group of the loggers' flags
+
+
+@dataclass(frozen=True)
+class LoggerSettings:
+    """The settings of a logger that has none of its own; the base of those that have."""
+
+
+class Logger(Protocol):
+    def begin(self, record: dict, generation: int) -> dict:
+        """The run's settings, once; what config.json records of this logger."""
+
+    def log(self, step: int, values: dict[str, float]) -> None:
+        """One metrics row's numeric values at its generation."""
+
+    def flush(self) -> None:
+        """At every save of the run's files."""
+
+    def artefacts(self, figures: list[Path], weights: list[Path]) -> None:
+        """The run's figures and final weight files, when it has run all its generations."""
+
+    def close(self, finished: bool) -> None:
+        """When the process ends; ``finished``: the run has run all its generations."""
+
+
+@dataclass(frozen=True)
+class LoggerEntry:
+    """A logger as the registry holds it."""
+
+    make: Callable[..., Logger]  # (the run's LogSettings, its folder) -> the logger
+    modules: tuple[str, ...] = ()  # what it imports beside the project's requirements
+    extra: str = ""  # the extra that installs them: requirements-<extra>.txt, pyproject.toml's [<extra>]
+    settings: type[LoggerSettings] = LoggerSettings  # the dataclass declaring its own settings
+
+    @property
+    def install_hint(self) -> str:
+        return f"pip install -r requirements-{self.extra}.txt (or pip install -e .[{self.extra}])"
+
+    def missing(self) -> list[str]:
+        return [module for module in self.modules if importlib.util.find_spec(module) is None]
+
+
+def scalars(row: dict, extra_columns: tuple[str, ...] = ()) -> dict[str, float]:
+    """The row's numeric, finite columns, but the step itself; ``extra_columns``: the policy kind's."""
+    found = {}
+    for name in METRICS_COLUMNS[1:] + tuple(extra_columns):
+        try:
+            value = float(row.get(name))
+        except (TypeError, ValueError):  # absent, empty or not a number
+            continue
+        if math.isfinite(value):
+            found[name] = value
+    return found

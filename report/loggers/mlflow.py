@@ -1,0 +1,123 @@
+"""``--logger mlflow``: the run in MLflow (``requirements-mlflow.txt``: MLflow's client, and SQLAlchemy
+for a database store).
+
+The tracking store is ``--mlflow_uri``, else ``MLFLOW_TRACKING_URI``, else a SQLite database in the run
+folder (``<run folder>/mlflow/mlflow.db``, its artifacts beside it): MLflow 3 keeps its file store only in
+maintenance mode and refuses it unless told otherwise, so a local run goes to a database. View it with
+``mlflow ui --backend-store-uri sqlite:///<run folder>/mlflow/mlflow.db``.
+
+The MLflow run, in experiment ``--mlflow_experiment``, gets the run's settings as parameters (``es.lr``,
+``policy.hebb_rule``, ...), config.json itself as an artifact and the command as a tag; each metrics row is
+one batch of metrics at its generation; the figures and final weight files are artifacts under
+``figures/`` and ``weights/``. Its id is recorded in config.json (``log.mlflow_run_id``): a resumed run
+continues it, sending none of the generations it already holds, and adds the parameters it lacks (MLflow
+keeps a parameter's first value: a resumable setting changed by the resume, such as ``run.generations``,
+stays as first logged there; config.json, logged again, has the new value).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from report.loggers.base import GROUP, LoggerEntry, LoggerSettings
+from settings import setting
+
+WITH_MLFLOW = ("logger", "mlflow")  # what its settings require
+SECTIONS = ("es", "policy", "env", "run", "log")  # config.json's settings, logged as parameters
+STEP_KEY = "total_env_steps"  # a column every row has, finite: which steps the MLflow run holds
+BATCH = 100  # parameters per request (MLflow's limit)
+
+
+@dataclass(frozen=True)
+class MLflowSettings(LoggerSettings):
+    mlflow_uri: str | None = setting(None, nonempty=True, requires=WITH_MLFLOW, resumable=True, group=GROUP,
+                                     metavar="URI", shown_default="MLFLOW_TRACKING_URI, else sqlite:///<run>/mlflow/"
+                                                                  "mlflow.db",
+                                     help="the MLflow tracking store (a server's http URI, a database's)")
+    mlflow_experiment: str = setting("hebbian-es", nonempty=True, requires=WITH_MLFLOW, resumable=True, group=GROUP,
+                                     metavar="NAME", help="the MLflow experiment of the run")
+    mlflow_run_id: str | None = setting(None, flag=None, derived=True, requires=WITH_MLFLOW,
+                                        help="the MLflow run's id, made at the run's start (a resume continues it)")
+
+
+def parameters(record: dict) -> dict[str, str]:
+    """config.json's settings, flat: ``{"es.lr": "0.2", ...}``."""
+    return {f"{section}.{key}": str(value) for section in SECTIONS for key, value in record.get(section, {}).items()}
+
+
+class MLflowLogger:
+    def __init__(self, settings: MLflowSettings, run_folder: Path, say=print):
+        self.settings, self.folder = settings, Path(run_folder)
+        self.client = self.run_id = None
+        self.held = 0  # the last generation the MLflow run holds
+
+    def store(self) -> tuple[str, str | None]:
+        """The tracking URI, and where a new experiment of the run folder's own database keeps its artifacts."""
+        given = self.settings.mlflow_uri or os.environ.get("MLFLOW_TRACKING_URI")
+        if given:
+            return given, None
+        local = (self.folder / "mlflow").resolve()
+        local.mkdir(exist_ok=True)
+        return f"sqlite:///{local / 'mlflow.db'}", (local / "artifacts").as_uri()
+
+    def begin(self, record: dict, generation: int) -> dict:
+        from mlflow.entities import Param
+        from mlflow.exceptions import MlflowException
+        from mlflow.tracking import MlflowClient
+
+        for name in ("mlflow", "alembic"):  # their notes on creating the database: the run's output stays ours
+            logging.getLogger(name).setLevel(logging.WARNING)
+
+        uri, artifacts = self.store()
+        self.client = MlflowClient(tracking_uri=uri)
+        known = {}
+        if self.settings.mlflow_run_id is not None:
+            try:
+                run = self.client.get_run(self.settings.mlflow_run_id)
+            except MlflowException:
+                raise ValueError(f"the MLflow run {self.settings.mlflow_run_id} that config.json records is not in "
+                                 f"{uri}; give --mlflow_uri the store it was logged to") from None
+            self.run_id, known = run.info.run_id, run.data.params
+            self.held = max((metric.step for metric in self.client.get_metric_history(self.run_id, STEP_KEY)),
+                            default=0)
+            self.client.update_run(self.run_id, status="RUNNING")
+        else:
+            name = self.settings.mlflow_experiment
+            experiment = self.client.get_experiment_by_name(name)
+            experiment_id = (experiment.experiment_id if experiment is not None else
+                             self.client.create_experiment(name, artifact_location=artifacts))
+            self.run_id = self.client.create_run(experiment_id, run_name=self.folder.name,
+                                                 tags={"command": str(record.get("command", ""))}).info.run_id
+        new = [Param(key, value) for key, value in parameters(record).items() if key not in known]
+        for start in range(0, len(new), BATCH):
+            self.client.log_batch(self.run_id, params=new[start:start + BATCH])
+        self.client.log_dict(self.run_id, record, "config.json")
+        return {"mlflow_run_id": self.run_id}
+
+    def log(self, step: int, values: dict[str, float]) -> None:
+        if step <= self.held:
+            return
+        from mlflow.entities import Metric
+
+        now = int(time.time() * 1000)
+        self.client.log_batch(self.run_id, metrics=[Metric(key, value, now, step) for key, value in values.items()])
+
+    def flush(self) -> None:
+        pass
+
+    def artefacts(self, figures: list[Path], weights: list[Path]) -> None:
+        for kind, paths in (("figures", figures), ("weights", weights)):
+            for path in paths:
+                self.client.log_artifact(self.run_id, str(path), kind)
+
+    def close(self, finished: bool) -> None:
+        if self.run_id is not None:
+            self.client.set_terminated(self.run_id, "FINISHED" if finished else "KILLED")
+
+
+LOGGER = LoggerEntry(MLflowLogger, modules=("mlflow", "sqlalchemy", "alembic"), extra="mlflow",
+                     settings=MLflowSettings)
