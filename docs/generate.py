@@ -150,13 +150,16 @@ TABLE = re.compile(r"(?<!`)(<!-- table:(?P<record>[\w.-]+) (?P<key>\w+) -->\n)(?
 
 
 def table_cell(value) -> str:
-    """Text as it is; a number as ``number`` writes it; an estimate as "value [low, high]" (with ``digits``
-    decimals where it gives them: a probability)."""
+    """Text as it is; a count (an int) as it is, with thousands separators; any other number as ``number``
+    writes it; an estimate as "value [low, high]" (with ``digits`` decimals where it gives them: a
+    probability)."""
     if isinstance(value, dict):
         digits = value.get("digits")
         shown = number if digits is None else (lambda x: f"{x:.{digits}f}")
         return f"{shown(value['value'])} [{shown(value['low'])}, {shown(value['high'])}]"
-    if isinstance(value, (int, float)) and not isinstance(value, bool):
+    if isinstance(value, int) and not isinstance(value, bool):
+        return f"{value:,}"
+    if isinstance(value, float):
         return number(value)
     return cell(value)
 

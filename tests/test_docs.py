@@ -603,8 +603,8 @@ def test_a_figure_that_cannot_be_published_is_refused(tmp_path, kind, message):
 def a_table_record(folder: Path, name: str, loaded: bool = False) -> Path:
     path = a_record(folder, name, loaded)
     body = json.loads(path.read_text())
-    body["notes"]["results"] = {"columns": ["row", "steps", "P"],
-                                "rows": [["snes", {"value": 20513.4, "low": 15870, "high": 26011},
+    body["notes"]["results"] = {"columns": ["row", "population", "budget", "σ", "steps", "P"],
+                                "rows": [["snes", 64, 1000000, 0.02394, {"value": 20513.4, "low": 15870, "high": 26011},
                                           {"value": 0.625, "low": 0.4, "high": 0.85, "digits": 2}]]}
     path.write_text(json.dumps(body))
     return path
@@ -616,8 +616,8 @@ def test_a_records_table_is_rendered_with_its_intervals_and_machine(tmp_path):
     text = "<!-- table:solve results -->\nold\n<!-- end table -->"
     link = os.path.relpath(tmp_path / "solve.json", page.parent)
     assert generate.render_figures(text, page, tmp_path) == (
-        "<!-- table:solve results -->\n| row | steps | P |\n|---|---|---|\n"
-        "| snes | 20,513 [15,870, 26,011] | 0.62 [0.40, 0.85] |\n\n"
+        "<!-- table:solve results -->\n| row | population | budget | σ | steps | P |\n|---|---|---|---|---|---|\n"
+        "| snes | 64 | 1,000,000 | 0.024 | 20,513 [15,870, 26,011] | 0.62 [0.40, 0.85] |\n\n"
         f"[AMD EPYC, 2 cores, 2026-01-01]({link})\n<!-- end table -->")
     a_table_record(tmp_path, "busy", loaded=True)
     with pytest.raises(generate.FigureError, match="loaded"):
