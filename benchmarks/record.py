@@ -6,7 +6,13 @@ A record holds the commit, the date, the CPU model and cores, the versions of th
 speed, the 1-minute load average before and after the run, the command, and for each measure its value in
 every round with their median, minimum and maximum. A record taken while the load average exceeded the
 number of cores, before or after the run, is marked ``loaded``: the machine was shared, and the docs
-refuse to publish it (docs/development.md, "Benchmark discipline").
+refuse to publish it (docs/development.md, "Benchmark discipline"). A record of counts that no load can move
+(environment steps to solve a task, from seeded runs) is made with ``timed=False``: it keeps its load, and is
+never marked loaded.
+
+Beside its measures a record keeps notes: results that are not figures, and tables (``table``), which
+``docs/generate.py`` renders as they are, their cells text, numbers or ``{"value", "low", "high"}`` estimates
+with their intervals.
 """
 
 from __future__ import annotations
@@ -99,14 +105,15 @@ class Record:
     """The record of one run of a benchmark script. Made at the start of the run (the load before it),
     given measures as they are taken, written at the end (the load after it)."""
 
-    def __init__(self, name: str, extra_versions: tuple[str, ...] = ()):
+    def __init__(self, name: str, extra_versions: tuple[str, ...] = (), timed: bool = True):
         script = Path(sys.argv[0]).resolve()
         shown = script.relative_to(ROOT) if script.is_relative_to(ROOT) else script
         self.name = re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
         self.started = datetime.now(UTC)
         self.fields = {"command": shlex.join(["python", str(shown), *sys.argv[1:]]), "commit": commit(),
                        "date": self.started.isoformat(timespec="seconds"), "cpu": cpu_model(),
-                       "cores": os.cpu_count(), "versions": versions(extra_versions), "load_before": load()}
+                       "cores": os.cpu_count(), "versions": versions(extra_versions), "load_before": load(),
+                       "timed": timed}
         self.measures: dict[str, Measure] = {}
         self.notes: dict[str, object] = {}
 
@@ -120,10 +127,17 @@ class Record:
         """A result that is not a figure (an identity check, the largest difference found)."""
         self.notes[key] = value
 
+    def table(self, key: str, columns: list[str], rows: list[list]) -> None:
+        """A table for the docs (``<!-- table:RECORD KEY -->``): each cell text, a number, or an estimate
+        ``{"value": v, "low": l, "high": h}`` with its interval."""
+        if any(len(row) != len(columns) for row in rows):
+            raise ValueError(f"{key}: every row needs {len(columns)} cells ({', '.join(columns)})")
+        self.notes[key] = {"columns": list(columns), "rows": [list(row) for row in rows]}
+
     def write(self, folder: Path) -> Path:
         after = load()
         cores = self.fields["cores"]
-        loaded = max(self.fields["load_before"], after) > cores
+        loaded = self.fields["timed"] and max(self.fields["load_before"], after) > cores
         body = {**self.fields, "load_after": after, "loaded": loaded,
                 "measures": {key: asdict(measure) for key, measure in self.measures.items()}, "notes": self.notes}
         folder.mkdir(parents=True, exist_ok=True)
@@ -132,7 +146,7 @@ class Record:
         shown = path.relative_to(ROOT) if path.is_relative_to(ROOT) else path
         state = (f"LOADED: load average {max(self.fields['load_before'], after):.2f} on {cores} cores, not "
                  "publishable" if loaded else f"load average {self.fields['load_before']:.2f} -> {after:.2f} on "
-                 f"{cores} cores")
+                 f"{cores} cores" + ("" if self.fields["timed"] else "; counts, not timed: no load moves them"))
         short = [key for key, measure in self.measures.items() if measure.rounds < MIN_ROUNDS]
         if short:
             state += (f"; {', '.join(short) if len(short) < 4 else f'{len(short)} measures'} of fewer than "

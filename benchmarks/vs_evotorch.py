@@ -1,322 +1,281 @@
 #!/usr/bin/env python
-"""This tool against EvoTorch 0.6.1 on the same task, network and population, one strategy at a time.
+"""Environment steps to solve CartPole-v1, this tool against EvoTorch 0.6.1, judged by the same code.
 
-    python benchmarks/vs_evotorch.py --environment CartPole-v1 --seeds 5 --popsize 16 --generations 30
-    python benchmarks/vs_evotorch.py --environment HalfCheetah-v5 --seeds 3 --popsize 16 --generations 5
-    python benchmarks/vs_evotorch.py --strategies openai,pgpe,snes,sep_cma_es ...
-    python benchmarks/vs_evotorch.py --strategies pgpe --popsize 100 --radius 2.25 --clipup_max_speed 0.15 \
-        --pgpe_lr 0.1125 --generations 50    # EvoTorch's CartPole example's PGPE settings
+    python benchmarks/vs_evotorch.py --strategies snes,pgpe --settings matched,matched_from_zeros,defaults --seeds 10
 
-Both tools evolve the same network, obs -> 128 -> 64 -> actions, no biases, tanh hidden layers, the
-output argmax-ed (Discrete) or clipped (Box) (policies/network.py; EvoTorch's GymNE with the same layer
-string), from the same initial centre (this tool's initialisation for the seed), with the same
-population, in ONE process each (this tool with --threads 1, GymNE without Ray
-actors), from the same seed. Every generation each tool also runs its centre once (this tool's loop
-does; for EvoTorch, ``GymNE.run`` on the centre, whose steps are added to its count) and a run is
-*solved* at the first generation whose centre return reaches --target (CartPole-v1: 475). A run
-stops there, or after --generations. One untimed generation of each tool comes first (imports, numba's
-compilation). EvoTorch's episodes start from unseeded resets (GymNE takes no seed), so its runs are
-not repeatable; this tool's are.
+The speed side by side is ``benchmarks/vs_evotorch_speed.py``; this script counts steps, which no load moves
+(its record is not timed).
 
-Measured per seed: environment steps per second (all of a run's steps over its generations' wall time,
-setup excluded) and environment steps to solve. The two tools alternate within one invocation (seed 1:
-this tool first, seed 2: EvoTorch first, ...) so that the machine's drift falls on both. Printed per
-strategy: each seed's figures, the ratio of steps per second (this tool / EvoTorch) as median and
-range over the seeds, and the median steps to solve (unsolved runs count as not solved: the median is
-then "not solved" if half of them are).
+**The runs.** Each (strategy, settings) row runs ``--seeds`` seeds (1, 2, ...) of each tool, every run seeded:
+this tool's runs are a function of their seed; EvoTorch's are seeded through torch (its sampling), numpy and
+random, and its environment's reset stream is seeded once from numpy's (``peers/evotorch_train.SeededEnv``:
+GymNE resets without a seed). Both tools evolve the same network, obs -> 128 -> 64 -> actions, no biases,
+tanh, each in this process (this tool with ``--threads 1``, GymNE without Ray actors).
 
-The counterparts (COUNTERPARTS): this tool's ``openai`` (OpenAI-ES: mirrored sampling, centred ranks
-standardised, SGD step lr / (N sigma) * sum F eps) is EvoTorch's PGPE with sigma frozen
-(stdev_learning_rate 0), centred ranking and plain gradient ascent at center_learning_rate
-lr / (sigma^2 * std of the centred ranks): the same first step; ``pgpe`` is PGPE with ClipUp, given the
-same maximum speed and step as this tool (--clipup_max_speed, --pgpe_lr; by default this tool's defaults
-for the run's parameter count) and this tool's sigma learning rate and largest sigma change; ``snes``
-SNES, ``cma_es`` / ``sep_cma_es`` CMA-ES full / separable, each with sigma and population as given
-(--radius gives sigma as EvoTorch's radius_init does: sigma = radius / sqrt(parameters)).
-A strategy this tool does not have (``--strategy`` of the training scripts) is reported as such.
+**The judge.** After every generation the centre of either tool (EvoTorch's ``status["center"]``, whose
+layout is this tool's: ``tests/test_vs_evotorch.py``) runs ``--test_episodes`` episodes through this tool's
+evaluation (``envs.evaluation.evaluate``, the rollout of training and of ``evaluate_static.py``), on held-out
+seeds: ``base, base + 1, ...`` with ``base`` drawn from the run's seed in [2**31, 2**32 - episodes), a range no
+training episode's seed comes from (this tool's are below 2**31 - 1; EvoTorch's environment is seeded once
+below 2**31 and then continues its own stream). The same seeds judge both tools' runs of a seed. With
+observation normalisation the centre is judged with its tool's statistics at that moment (EvoTorch's
+``get_observation_stats()``, which normalise as this tool's: (x - mean) / max(std, 0.1), no clip). A run is
+*solved* at the first generation whose centre's mean return over those episodes reaches ``--target``
+(CartPole-v1's 475); the judge's episodes are not counted.
 
-Targets (issue 22): per environment step every strategy >= 1.5x its EvoTorch counterpart; on
-CartPole-v1 this tool's PGPE and SNES need no more environment steps to solve than EvoTorch's,
-median over 5 seeds. Each run writes its record to benchmarks/results/ (benchmarks/record.py): per
-strategy, each seed's ratio of steps per second and both tools' steps to solve. Needs: pip install -r
-requirements-bench.txt
+**What is counted.** The environment steps of the members' training episodes, up to and including the
+generation that solved: EvoTorch's ``interaction_count``, this tool's members' episodes. This tool's loop also
+runs its centre once a generation (the original's ``center_return``, a log that no update uses); those
+steps are left out, as EvoTorch runs no such episode: one rule for both. (They would add 1 / (popsize + 1)
+to this tool's counts.)
+
+**Unsolved runs.** A run stops once its steps reach ``--budget``; a run not solved by then counts as the
+budget: a censored value (it needed at least that many), so the statistics rank it behind every solved run,
+on both sides alike.
+
+**The statistics** (``report/stats.py``, rliable): per row and tool the interquartile mean of the steps to
+solve with its 95 % stratified bootstrap interval, and the probability that a run of this tool needs fewer
+steps than a run of EvoTorch, P(this tool < EvoTorch) (ties count a half), with its interval.
+
+**The rows.** ``matched``: the same settings on both sides, EvoTorch's CartPole settings where it documents
+them (σ from EvoTorch's radius 2.25, observation normalisation on every episode, population 64, each
+strategy's learning rates, the same initial centre: this tool's initialisation for the seed, no L2 penalty in
+this tool's fitness). ``matched_from_zeros``: the same, both starting from zeros, as EvoTorch's example does
+(its own default centre is U(±1e-5)). ``defaults``: each tool as its documentation sets it up: this tool's
+``train_static.py --strategy S`` defaults; EvoTorch's CartPole example (PGPE,
+examples/notebooks/Functional_API/problem.ipynb) and its documented SNES for networks
+(docs/user_guide/supervised_ne.md), both with the example's observation normalisation. The record holds the
+settings table, each run's steps, and the results table (docs/strategies.md renders both). Needs: pip install
+-r requirements-bench.txt
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import itertools
-import statistics
+import math
 import sys
 import tempfile
-import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from peers import evotorch_train
+from peers.evotorch_train import EvoTorchSettings
 from record import Record, add_results_flag
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from envs import ProblemSpec
+from envs.evaluation import evaluate
 from es.loop import Trainer
 from es.runfolder import RunFolder
 from es.settings import ESSettings, RunSettings
 from es.strategies.pgpe import default_max_speed
-from policies.network import HIDDEN
+from es.strategies.snes import default_sigma_lr
+from policies import PolicySettings
 
 INSTALL_HINT = "pip install -r requirements-bench.txt"
+STRATEGIES = ("snes", "pgpe")
+SETTINGS = ("matched", "matched_from_zeros", "defaults")
+HELD_OUT = (2**31, 2**32)  # the judge's seeds; this tool's training seeds are below 2**31 - 1
+HELD_OUT_STREAM = 5  # the judge's seeds are drawn from [run seed, HELD_OUT_STREAM]
+EVOTORCH_RADIUS = 2.25  # radius_init of EvoTorch's CartPole example and of its networks' examples
+MATCHED_POPSIZE = 64
 
 
-@dataclasses.dataclass
-class Result:
-    tool: str
-    seed: int
-    steps: int = 0
-    seconds: float = 0.0
-    solved_at: int | None = None  # environment steps when the centre first reached the target
-    generations: int = 0
-    final_centre: float = float("nan")
-
-    @property
-    def steps_per_second(self) -> float:
-        return self.steps / self.seconds if self.seconds else float("nan")
+# --- the rows: each tool's settings ---------------------------------------------------------------
 
 
-def parse(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="\n".join(__doc__.splitlines()[2:]))
-    parser.add_argument("--environment", default="CartPole-v1")
-    parser.add_argument("--strategies", default="openai", help="comma-separated, of " + ", ".join(COUNTERPARTS))
-    parser.add_argument("--seeds", type=int, default=5)
-    parser.add_argument("--popsize", type=int, default=16)
-    parser.add_argument("--generations", type=int, default=30, help="the most generations of a run")
-    parser.add_argument("--sigma", type=float, default=ESSettings.sigma)
-    parser.add_argument("--lr", type=float, default=ESSettings.lr, help="openai's learning rate")
-    parser.add_argument("--radius", type=float, default=None,
-                        help="the initial sigma given as the norm of the sigma vector, EvoTorch's radius_init: "
-                             "sigma = radius / sqrt(parameters) for both tools (instead of --sigma)")
-    parser.add_argument("--clipup_max_speed", type=float, default=None,
-                        help="pgpe: ClipUp's maximum speed (default: this tool's, sigma sqrt(parameters) / 15)")
-    parser.add_argument("--pgpe_lr", type=float, default=None,
-                        help="pgpe: the centre's step size (default: this tool's, --clipup_max_speed / 2)")
-    parser.add_argument("--target", type=float, default=None,
-                        help="centre return that counts as solved (default: 475 on CartPole-v1, none elsewhere)")
-    add_results_flag(parser)
-    args = parser.parse_args(argv)
-    unknown = [name for name in args.strategies.split(",") if name not in COUNTERPARTS]
-    if unknown:
-        parser.error(f"--strategies: unknown {', '.join(unknown)}; choose from {', '.join(COUNTERPARTS)}")
-    if args.target is None and args.environment.startswith("CartPole"):
-        args.target = 475.0
-    return args
+@dataclass(frozen=True)
+class Ours:
+    es: ESSettings
+    obs_norm: bool
+    centre: str = "this tool"  # where the search starts: this tool's initialisation for the seed, or "zeros"
 
 
-# --- this tool --------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Row:
+    strategy: str
+    settings: str
+    ours: Ours
+    theirs: EvoTorchSettings
 
 
-def our_settings(strategy: str, args: argparse.Namespace) -> ESSettings | None:
-    """The ES settings of ``strategy``, or None where this version of the tool does not have it."""
-    names = {field.name for field in dataclasses.fields(ESSettings)}
-    values = {"popsize": args.popsize, "sigma": args.sigma}
-    if "strategy" in names:
-        values["strategy"] = strategy
-    elif strategy != "openai":
-        return None
-    if strategy == "openai":
-        values["lr"] = args.lr
-    if strategy == "pgpe":
-        values.update(pgpe_lr=args.pgpe_lr, clipup_max_speed=args.clipup_max_speed)
-    try:
-        return ESSettings(**values)
-    except ValueError:
-        return None
+def rows(strategies: list[str], settings: list[str], dim: int) -> list[Row]:
+    """The rows asked for, for a network of ``dim`` parameters."""
+    sigma = EVOTORCH_RADIUS / math.sqrt(dim)  # EvoTorch's radius_init, as a standard deviation
+    # EvoTorch's CartPole example (PGPE): max_speed 0.15, center_learning_rate 0.75 * it, radius 15 * it
+    pgpe = dict(center_lr=0.1125, sigma_lr=0.1, max_speed=0.15, max_sigma_change=0.2)
+    made = []
+    for strategy in strategies:
+        for name in settings:
+            if name.startswith("matched"):
+                common = dict(popsize=MATCHED_POPSIZE, sigma=sigma, obs_norm_prob=1.0, fitness_l2=0.0)
+                ours = (ESSettings(strategy="pgpe", pgpe_lr=pgpe["center_lr"], clipup_max_speed=pgpe["max_speed"],
+                                   pgpe_sigma_lr=pgpe["sigma_lr"], pgpe_max_sigma_change=pgpe["max_sigma_change"],
+                                   **common) if strategy == "pgpe" else ESSettings(strategy="snes", **common))
+                centre = "zeros" if name == "matched_from_zeros" else "this tool"
+                theirs = EvoTorchSettings(strategy, MATCHED_POPSIZE, sigma=sigma, obs_norm=True, centre=centre,
+                                          **(pgpe if strategy == "pgpe" else {}))
+                made.append(Row(strategy, name, Ours(ours, True, centre), theirs))
+            else:
+                theirs = (EvoTorchSettings("pgpe", 100, radius=EVOTORCH_RADIUS, obs_norm=True, centre="zeros", **pgpe)
+                          if strategy == "pgpe" else
+                          EvoTorchSettings("snes", 50, radius=EVOTORCH_RADIUS, obs_norm=True))
+                made.append(Row(strategy, name, Ours(ESSettings(strategy=strategy), False), theirs))
+    return made
 
 
-def our_trainer(es: ESSettings, args: argparse.Namespace, seed: int, folder: str) -> Trainer:
-    spec = ProblemSpec((args.environment,))
-    return Trainer.start(es, RunSettings(generations=args.generations, threads=1, seed=seed), spec.build(),
-                         spec.build, spec.env_ids, RunFolder(Path(folder)), args.environment, log=lambda line: None)
+def settings_table(row: Row, dim: int) -> list[list]:
+    """Two rows of the settings table: what each tool ran with, defaults resolved to numbers."""
+    es, theirs = row.ours.es, row.theirs
+    if row.strategy == "pgpe":
+        speed = es.clipup_max_speed or default_max_speed(es.sigma, dim)
+        ours_rates = (f"centre {es.pgpe_lr or speed / 2:.4g} (ClipUp, max speed {speed:.3g}, momentum "
+                      f"{es.clipup_momentum:g}); σ {es.pgpe_sigma_lr:g}, change ≤ {es.pgpe_max_sigma_change:g}")
+        their_rates = (f"centre {theirs.center_lr:.4g} (ClipUp, max speed {theirs.max_speed:.3g}, momentum 0.9); "
+                       f"σ {theirs.sigma_lr:g}, change ≤ {theirs.max_sigma_change:g}")
+    else:
+        ours_rates = f"centre {es.snes_lr:g}; σ {es.snes_sigma_lr or default_sigma_lr(dim):.4g}"
+        their_rates = f"centre {theirs.center_lr or 1:g}; σ {0.2 * (3 + math.log(dim)) / math.sqrt(dim):.4g}"
+    their_sigma = theirs.sigma if theirs.sigma is not None else theirs.radius / math.sqrt(dim)
+    ours_norm = f"yes, every episode{'' if es.obs_norm_prob == 1 else f' × {es.obs_norm_prob:g}'}" \
+        if row.ours.obs_norm else "no"
+    centre = {"this tool": "this tool's initialisation", "zeros": "zeros", "evotorch": "EvoTorch's, U(±1e-5)"}
+    return [[row.strategy, row.settings, "this tool", es.popsize, f"{es.sigma:.4g}", ours_norm, ours_rates,
+             f"{es.fitness_l2:g}", centre[row.ours.centre]],
+            [row.strategy, row.settings, "EvoTorch", theirs.popsize, f"{their_sigma:.4g}",
+             "yes, every episode" if theirs.obs_norm else "no", their_rates, "–", centre[theirs.centre]]]
 
 
-def initial_centre(args: argparse.Namespace, seed: int) -> np.ndarray:
-    """This tool's generation-0 centre for ``seed``: EvoTorch starts from it too. Both tools lay the
-    network's weights out as torch does, (out, in) per layer, in layer order, so it is the same network."""
+# --- the judge ------------------------------------------------------------------------------------
+
+
+class Judge:
+    """This tool's evaluation of a centre, on held-out seeds: the one judge of both tools' runs."""
+
+    def __init__(self, environment: str, obs_norm: bool, episodes: int, target: float):
+        self.problem = ProblemSpec((environment,), PolicySettings(obs_norm=obs_norm)).build()
+        self.episodes, self.target = episodes, target
+
+    def first_seed(self, run_seed: int) -> int:
+        low, high = HELD_OUT
+        return int(np.random.default_rng([run_seed, HELD_OUT_STREAM]).integers(low, high - self.episodes))
+
+    def solved(self, centre: np.ndarray, statistics: tuple[np.ndarray, np.ndarray] | None, run_seed: int) -> bool:
+        """Whether ``centre``, normalising with ``statistics`` (None: none gathered yet, the identity), reaches
+        the target on the run's held-out seeds."""
+        size = self.problem.policy.normalised_inputs
+        if size:
+            self.problem.policy.observe(statistics if statistics is not None else (np.zeros(size), np.ones(size)))
+        [report] = evaluate(self.problem, np.asarray(centre, dtype=np.float32), self.episodes,
+                            self.first_seed(run_seed))
+        return report.mean >= self.target
+
+    def close(self) -> None:
+        self.problem.close()
+
+
+def initial_centre(judge: Judge, seed: int) -> np.ndarray:
+    """This tool's generation-0 centre for ``seed`` (es.loop.Trainer draws it from [seed, 1])."""
+    return judge.problem.policy.initial_params(np.random.default_rng([seed, 1]))
+
+
+# --- one run of each tool -------------------------------------------------------------------------
+
+
+class MemberSteps:
+    """This tool's evaluator, counting the steps of the members' episodes (not the centre's)."""
+
+    def __init__(self, inner, popsize: int):
+        self.inner, self.popsize, self.steps = inner, popsize, 0
+        self.workers = inner.workers
+
+    def evaluate(self, generation, progress=None):
+        results = self.inner.evaluate(generation, progress)
+        self.steps += int(results.steps[generation.tasks["member"] < self.popsize].sum())
+        return results
+
+    def close(self) -> None:
+        self.inner.close()
+
+
+def run_ours(row: Row, args: argparse.Namespace, seed: int, judge: Judge) -> int | None:
+    """Members' steps when this tool's centre is first judged solved; None if not within the budget."""
+    spec = ProblemSpec((args.environment,), PolicySettings(obs_norm=row.ours.obs_norm))
     with tempfile.TemporaryDirectory() as folder:
-        trainer = our_trainer(ESSettings(popsize=args.popsize), args, seed, folder)
+        trainer = Trainer.start(row.ours.es, RunSettings(generations=10**9, threads=1, seed=seed), spec.build(),
+                                spec.build, spec.env_ids, RunFolder(Path(folder)), args.environment,
+                                log=lambda line: None)
+        trainer.evaluator = counter = MemberSteps(trainer.evaluator, row.ours.es.popsize)
+        if row.ours.centre == "zeros":
+            trainer.state = trainer.strategy.initial_state(np.zeros_like(trainer.state.theta))
         try:
-            return trainer.state.theta.copy()
+            while counter.steps < args.budget:
+                trainer.generation()
+                statistics = trainer.observations.published() if trainer.observations is not None else None
+                if judge.solved(trainer.state.theta, statistics, seed):
+                    return counter.steps if counter.steps <= args.budget else None
         finally:
             trainer.close()
+    return None
 
 
-def run_ours(es: ESSettings, args: argparse.Namespace, seed: int) -> Result:
-    """This tool's loop in this process (--threads 1), generation by generation, until solved."""
-    result = Result("this tool", seed)
-    with tempfile.TemporaryDirectory() as folder:
-        trainer = our_trainer(es, args, seed, folder)
-        try:
-            for _ in range(args.generations):
-                started = time.perf_counter()
-                row = trainer.generation()
-                result.seconds += time.perf_counter() - started
-                result.steps += int(row["env_steps"])
-                result.generations += 1
-                result.final_centre = float(row["center_return"])
-                if args.target is not None and result.final_centre >= args.target:
-                    result.solved_at = result.steps
-                    break
-        finally:
-            trainer.close()
-    return result
-
-
-# --- EvoTorch ---------------------------------------------------------------------------------------
-
-
-def centred_rank_std(popsize: int) -> float:
-    """The standard deviation of centred ranks (k / (N - 1) - 0.5): what standardising divides them by."""
-    ranks = np.arange(popsize) / (popsize - 1) - 0.5
-    return float(ranks.std())
-
-
-def openai_counterpart(problem, args, centre):
-    from evotorch.algorithms import PGPE
-
-    rate = args.lr / (args.sigma ** 2 * centred_rank_std(args.popsize))
-    return PGPE(problem, popsize=args.popsize, center_learning_rate=rate, stdev_learning_rate=0.0,
-                stdev_init=args.sigma, optimizer=None, ranking_method="centered", symmetric=True,
-                center_init=centre)
-
-
-def pgpe_counterpart(problem, args, centre):
-    from evotorch.algorithms import PGPE
-
-    # ClipUp (Toklu et al. 2020) with the same step size and maximum speed as this tool's run; sigma's
-    # learning rate and largest change are this tool's defaults, which are EvoTorch's example values
-    es = ESSettings(strategy="pgpe")
-    return PGPE(problem, popsize=args.popsize, center_learning_rate=args.pgpe_lr, stdev_learning_rate=es.pgpe_sigma_lr,
-                stdev_init=args.sigma, optimizer="clipup", optimizer_config={"max_speed": args.clipup_max_speed},
-                stdev_max_change=es.pgpe_max_sigma_change, ranking_method="centered", symmetric=True,
-                center_init=centre)
-
-
-def snes_counterpart(problem, args, centre):
-    from evotorch.algorithms import SNES
-
-    return SNES(problem, popsize=args.popsize, stdev_init=args.sigma, center_init=centre)
-
-
-def cma_counterpart(separable: bool):
-    def make(problem, args, centre):
-        from evotorch.algorithms import CMAES
-
-        return CMAES(problem, popsize=args.popsize, stdev_init=args.sigma, separable=separable, center_init=centre)
-    return make
-
-
-COUNTERPARTS = {"openai": openai_counterpart, "pgpe": pgpe_counterpart, "snes": snes_counterpart,
-                "cma_es": cma_counterpart(False), "sep_cma_es": cma_counterpart(True)}
-
-
-def evotorch_network() -> str:
-    sizes = ("obs_length", *map(str, HIDDEN), "act_length")
-    layers = [f"Linear({a}, {b}, bias=False)" for a, b in itertools.pairwise(sizes)]
-    return " >> Tanh() >> ".join(layers)
-
-
-def run_evotorch(strategy: str, args: argparse.Namespace, seed: int) -> Result:
+def run_evotorch(row: Row, args: argparse.Namespace, seed: int, judge: Judge) -> int | None:
+    """EvoTorch's steps when its centre is first judged solved; None if not within the budget."""
     import torch
-    from evotorch.neuroevolution import GymNE
 
-    torch.manual_seed(seed)
+    evotorch_train.seed_everything(seed)
     torch.set_num_threads(1)
-    result = Result("EvoTorch", seed)
-    problem = GymNE(env=args.environment, network=evotorch_network(), num_actors=None)
-    centre = initial_centre(args, seed)
-    if centre.size != problem.solution_length:
+    problem = evotorch_train.problem(args.environment, row.theirs.obs_norm)
+    centre = initial_centre(judge, seed) if row.theirs.centre == "this tool" else None
+    if centre is not None and centre.size != problem.solution_length:
         raise SystemExit(f"the networks differ: {centre.size} parameters here, {problem.solution_length} in EvoTorch")
-    searcher = COUNTERPARTS[strategy](problem, args, torch.from_numpy(centre))
-    for _ in range(args.generations):
-        started = time.perf_counter()
-        before = problem.interaction_count
+    searcher = evotorch_train.searcher(problem, row.theirs, None if centre is None else torch.from_numpy(centre))
+    while problem.interaction_count < args.budget:
         searcher.step()
-        centre = problem.run(searcher.status["center"], num_episodes=1)  # not counted by GymNE itself
-        result.seconds += time.perf_counter() - started
-        result.steps += problem.interaction_count - before + int(centre["interaction_count"])
-        result.generations += 1
-        result.final_centre = float(centre["cumulative_reward"])
-        if args.target is not None and result.final_centre >= args.target:
-            result.solved_at = result.steps
-            break
-    return result
+        statistics = None
+        if row.theirs.obs_norm and problem.get_observation_stats().count > 0:
+            stats = problem.get_observation_stats()
+            statistics = (np.asarray(stats.mean, np.float64), np.asarray(stats.stdev, np.float64))
+        centre = searcher.status["center"].cpu().numpy().astype(np.float32)
+        if judge.solved(centre, statistics, seed):
+            return problem.interaction_count if problem.interaction_count <= args.budget else None
+    return None
 
 
-# --- the comparison -----------------------------------------------------------------------------------
+# --- the comparison ---------------------------------------------------------------------------------
 
 
-def median_solved(results: list[Result]) -> float:
-    """Median steps to solve, an unsolved run counting as infinitely many."""
-    return statistics.median([r.solved_at if r.solved_at is not None else float("inf") for r in results])
+def censored(steps: list[int | None], budget: int) -> list[float]:
+    """Steps to solve, an unsolved run counted as the budget."""
+    return [float(budget if value is None else value) for value in steps]
 
 
-def show(value: float) -> str:
-    return "not solved" if value == float("inf") else f"{value:,.0f}"
+def estimate(value: float, low: float, high: float, digits: int | None = None) -> dict:
+    return {"value": value, "low": low, "high": high, **({} if digits is None else {"digits": digits})}
 
 
-def compare(record: Record, strategy: str, args: argparse.Namespace) -> None:
-    es = our_settings(strategy, args)
-    if es is None:
-        print(f"\n## {strategy}: this tool has no --strategy {strategy} yet; EvoTorch not run")
-        return
-    warm_up = argparse.Namespace(**{**vars(args), "generations": 1})  # numba's compilation, imports: untimed
-    run_ours(es, warm_up, 0)
-    run_evotorch(strategy, warm_up, 0)
+def compare(row: Row, args: argparse.Namespace) -> tuple[list[int | None], list[int | None]]:
+    """Each seed's steps to solve, this tool's and EvoTorch's (None: not within the budget). Each tool's judge
+    normalises observations where that tool's runs do; otherwise they are one and the same code."""
+    judges = {obs_norm: Judge(args.environment, obs_norm, args.test_episodes, args.target)
+              for obs_norm in {row.ours.obs_norm, row.theirs.obs_norm}}
     ours, theirs = [], []
-    for number, seed in enumerate(range(1, args.seeds + 1)):
-        order = (("ours", "evotorch") if number % 2 == 0 else ("evotorch", "ours"))
-        for tool in order:
-            (ours if tool == "ours" else theirs).append(run_ours(es, args, seed) if tool == "ours"
-                                                        else run_evotorch(strategy, args, seed))
-    extra = f", ClipUp max speed {args.clipup_max_speed:g}, step {args.pgpe_lr:g}" if strategy == "pgpe" else ""
-    print(f"\n## {strategy} ({args.environment}, popsize {args.popsize}, sigma {args.sigma:.6g}{extra}, "
-          f"at most {args.generations} generations)")
-    print("| seed | tool | generations | env steps | steps/s | steps to solve | final centre return |")
-    print("|---|---|---|---|---|---|---|")
-    for mine, other in zip(ours, theirs):
-        for result in (mine, other):
-            solved = "-" if args.target is None else show(result.solved_at or float("inf"))
-            print(f"| {result.seed} | {result.tool} | {result.generations} | {result.steps:,} | "
-                  f"{result.steps_per_second:,.0f} | {solved} | {result.final_centre:.1f} |")
-    ratios = [mine.steps_per_second / other.steps_per_second for mine, other in zip(ours, theirs)]
-    record.add(f"{strategy}_steps_per_second", f"{strategy} on {args.environment}, popsize {args.popsize}: env steps "
-               "per second, this tool / EvoTorch, one value per seed", "x", ratios)
-    record.note(f"{strategy}_steps_to_solve", {"target": args.target, "seeds": [r.seed for r in ours],
-                                               "this tool": [r.solved_at for r in ours],
-                                               "EvoTorch": [r.solved_at for r in theirs]})
-    print(f"steps per second, this tool / EvoTorch: median {statistics.median(ratios):.2f}x "
-          f"(seeds: {min(ratios):.2f}x to {max(ratios):.2f}x; target >= 1.5x)")
-    if args.target is not None:
-        print(f"steps to solve (centre >= {args.target:g}), median over {args.seeds} seeds: this tool "
-              f"{show(median_solved(ours))}, EvoTorch {show(median_solved(theirs))}; solved "
-              f"{sum(r.solved_at is not None for r in ours)}/{args.seeds} and "
-              f"{sum(r.solved_at is not None for r in theirs)}/{args.seeds}")
-    print(f"final centre return, median: this tool {statistics.median(r.final_centre for r in ours):.1f}, "
-          f"EvoTorch {statistics.median(r.final_centre for r in theirs):.1f}")
+    try:
+        for seed in range(1, args.seeds + 1):
+            ours.append(run_ours(row, args, seed, judges[row.ours.obs_norm]))
+            theirs.append(run_evotorch(row, args, seed, judges[row.theirs.obs_norm]))
+            print(f"{row.strategy} {row.settings} seed {seed}: this tool {show(ours[-1])}, EvoTorch {show(theirs[-1])}",
+                  flush=True)
+    finally:
+        for judge in judges.values():
+            judge.close()
+    return ours, theirs
 
 
-def resolve_defaults(args: argparse.Namespace) -> None:
-    """sigma from --radius, and PGPE's maximum speed and step where not given: this tool's defaults, which
-    depend on the parameter count, given to both tools as numbers."""
-    parameters = initial_centre(args, 0).size
-    if args.radius is not None:
-        args.sigma = args.radius / parameters ** 0.5
-        print(f"radius {args.radius:g} over {parameters:,} parameters: sigma {args.sigma:.6g}")
-    if args.clipup_max_speed is None:
-        args.clipup_max_speed = default_max_speed(args.sigma, parameters)
-    if args.pgpe_lr is None:
-        args.pgpe_lr = args.clipup_max_speed / 2
+def show(steps: int | None) -> str:
+    return "not solved" if steps is None else f"{steps:,}"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -328,14 +287,72 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     import logging
 
+    from report.stats import improvements, summarise
+
     logging.getLogger("evotorch").setLevel(logging.WARNING)
-    print(f"EvoTorch {evotorch.__version__}; one process per tool; network {evotorch_network()}")
-    record = Record(f"vs_evotorch-{args.environment}", ("evotorch", "cma", "cmaes"))
-    resolve_defaults(args)
-    for strategy in args.strategies.split(","):
-        compare(record, strategy, args)
+    record = Record(f"vs_evotorch-{args.environment}", ("evotorch", "rliable"), timed=False)
+    sized = ProblemSpec((args.environment,)).build()
+    dim = sized.policy.num_params
+    sized.close()
+    chosen = rows(args.strategies, args.settings, dim)
+    settings, results = [], []
+    for row in chosen:
+        ours, theirs = compare(row, args)
+        key = f"{row.strategy}_{row.settings}"
+        for tool, steps in (("this_tool", ours), ("evotorch", theirs)):
+            record.add(f"{key}_{tool}", f"{row.strategy}, {row.settings} settings: {tool}'s environment steps to "
+                       f"solve {args.environment}, one value per seed (unsolved: the budget)", "steps",
+                       censored(steps, args.budget))
+        record.note(f"{key}_seeds", {"seeds": list(range(1, args.seeds + 1)), "this tool": ours, "EvoTorch": theirs})
+        scores = {"this tool": censored(ours, args.budget), "EvoTorch": censored(theirs, args.budget)}
+        summary = {s.group: s for s in summarise(scores, args.reps)}
+        [fewer] = [p for p in improvements({name: [-v for v in values] for name, values in scores.items()}, args.reps)
+                   if p.x == "this tool"]
+        settings += settings_table(row, dim)
+        results.append([row.strategy, row.settings,
+                        *(estimate(summary[name].iqm, summary[name].iqm_low, summary[name].iqm_high)
+                          for name in ("this tool", "EvoTorch")),
+                        f"{sum(v is not None for v in ours)}/{args.seeds}",
+                        f"{sum(v is not None for v in theirs)}/{args.seeds}",
+                        estimate(fewer.probability, fewer.low, fewer.high, digits=2)])
+        iqm = {name: f"{s.iqm:,.0f} [{s.iqm_low:,.0f}, {s.iqm_high:,.0f}]" for name, s in summary.items()}
+        print(f"## {row.strategy}, {row.settings}: IQM steps to solve, this tool {iqm['this tool']}, EvoTorch "
+              f"{iqm['EvoTorch']}; P(this tool needs fewer) {fewer.probability:.2f} [{fewer.low:.2f}, "
+              f"{fewer.high:.2f}]", flush=True)
+    record.table("settings", ["strategy", "settings", "tool", "population", "σ", "observation normalisation",
+                              "learning rates", "fitness L2", "initial centre"], settings)
+    record.table("results", ["strategy", "settings", "this tool: IQM steps [95 % CI]",
+                             "EvoTorch: IQM steps [95 % CI]", "this tool solved", "EvoTorch solved",
+                             "P(this tool needs fewer) [95 % CI]"], results)
+    record.note("protocol", {"budget": args.budget, "target": args.target, "test_episodes": args.test_episodes,
+                             "seeds": args.seeds, "reps": args.reps, "evotorch": evotorch.__version__})
     record.write(args.results)
     return 0
+
+
+def parse(argv: list[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser.add_argument("--environment", default="CartPole-v1")
+    parser.add_argument("--strategies", default="snes,pgpe", help="comma-separated, of " + ", ".join(STRATEGIES))
+    parser.add_argument("--settings", default=",".join(SETTINGS), help="comma-separated, of " + ", ".join(SETTINGS))
+    parser.add_argument("--seeds", type=int, default=10, help="runs of each tool per row: seeds 1 .. N")
+    parser.add_argument("--budget", type=int, default=500_000,
+                        help="environment steps after which a run stops; unsolved, it counts as this many")
+    parser.add_argument("--target", type=float, default=475.0, help="the mean held-out return that solves")
+    parser.add_argument("--test_episodes", type=int, default=10, help="the judge's held-out episodes")
+    parser.add_argument("--reps", type=int, default=2000, help="bootstrap replications")
+    add_results_flag(parser)
+    args = parser.parse_args(argv)
+    for flag, chosen, valid in (("--strategies", args.strategies, STRATEGIES), ("--settings", args.settings, SETTINGS)):
+        unknown = [name for name in chosen.split(",") if name not in valid]
+        if unknown:
+            parser.error(f"{flag}: unknown {', '.join(unknown)}; choose from {', '.join(valid)}")
+    args.strategies, args.settings = args.strategies.split(","), args.settings.split(",")
+    if args.seeds < 1 or args.budget < 1 or args.test_episodes < 1:
+        parser.error("--seeds, --budget and --test_episodes must be at least 1")
+    return args
 
 
 if __name__ == "__main__":

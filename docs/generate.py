@@ -12,6 +12,11 @@ range over the rounds and the machine, linked to the record ("9.31× (8.92–9.6
 record marked loaded, or a measure of fewer than 5 rounds, is refused (docs/development.md, "Benchmark
 discipline").
 
+Between ``<!-- table:RECORD KEY -->`` and ``<!-- end table -->`` a page holds a table a benchmark wrote into
+its record (``Record.table``: the settings and results of ``benchmarks/vs_evotorch.py``), each estimate with its
+interval ("20,513 [15,870, 26,011]"), followed by the machine and the link to the record. A loaded record is
+refused here too.
+
 ``python docs/generate.py`` rewrites the tables and figures of every page; ``--check`` rewrites nothing and
 exits 1 naming the pages that differ (tests/test_docs.py runs the same check).
 """
@@ -113,8 +118,8 @@ def number(value: float) -> str:
         else f"{value:.3f}"
 
 
-def figure(name: str, measure: str, page: Path, results: Path = records.RESULTS) -> str:
-    """The text of one figure: median, range and machine, linked (from ``page``) to its record."""
+def published(name: str, results: Path) -> tuple[Path, dict]:
+    """The record ``name`` and its path; FigureError where there is none or it is marked loaded."""
     path = results / f"{name}.json"
     if not path.is_file():
         raise FigureError(f"{name}: no record {path.relative_to(ROOT) if path.is_relative_to(ROOT) else path}")
@@ -122,6 +127,12 @@ def figure(name: str, measure: str, page: Path, results: Path = records.RESULTS)
     if record["loaded"]:
         raise FigureError(f"{name}: taken at load {max(record['load_before'], record['load_after']):.2f} on "
                           f"{record['cores']} cores (loaded); measure again on a quiet machine")
+    return path, record
+
+
+def figure(name: str, measure: str, page: Path, results: Path = records.RESULTS) -> str:
+    """The text of one figure: median, range and machine, linked (from ``page``) to its record."""
+    path, record = published(name, results)
     if measure not in record["measures"]:
         raise FigureError(f"{name}: no measure {measure!r} (it has {', '.join(record['measures'])})")
     values = record["measures"][measure]
@@ -134,8 +145,42 @@ def figure(name: str, measure: str, page: Path, results: Path = records.RESULTS)
     return f"[{text}]({Path(os.path.relpath(path, page.parent)).as_posix()})"
 
 
+TABLE = re.compile(r"(?<!`)(<!-- table:(?P<record>[\w.-]+) (?P<key>\w+) -->\n)(?P<text>.*?)(<!-- end table -->)",
+                   re.DOTALL)
+
+
+def table_cell(value) -> str:
+    """Text as it is; a count (an int) as it is, with thousands separators; any other number as ``number``
+    writes it; an estimate as "value [low, high]" (with ``digits`` decimals where it gives them: a
+    probability)."""
+    if isinstance(value, dict):
+        digits = value.get("digits")
+        shown = number if digits is None else (lambda x: f"{x:.{digits}f}")
+        return f"{shown(value['value'])} [{shown(value['low'])}, {shown(value['high'])}]"
+    if isinstance(value, int) and not isinstance(value, bool):
+        return f"{value:,}"
+    if isinstance(value, float):
+        return number(value)
+    return cell(value)
+
+
+def record_table(name: str, key: str, page: Path, results: Path = records.RESULTS) -> str:
+    """A record's table (``Record.table``) in markdown, then its machine and date, linked to the record."""
+    path, record = published(name, results)
+    table = record.get("notes", {}).get(key)
+    if not isinstance(table, dict) or {"columns", "rows"} - set(table):
+        raise FigureError(f"{name}: no table {key!r} in its notes")
+    lines = ["| " + " | ".join(map(cell, table["columns"])) + " |", "|" + "---|" * len(table["columns"])]
+    lines += ["| " + " | ".join(table_cell(value) for value in row) + " |" for row in table["rows"]]
+    link = Path(os.path.relpath(path, page.parent)).as_posix()
+    return "\n".join(lines) + f"\n\n[{record['cpu']}, {record['cores']} cores, {record['date'][:10]}]({link})\n"
+
+
 def render_figures(text: str, page: Path, results: Path = records.RESULTS) -> str:
-    """``text`` with every figure rewritten from its record; FigureError for one that cannot be published."""
+    """``text`` with every figure and record table rewritten from its record; FigureError for one that cannot be
+    published."""
+    text = TABLE.sub(lambda match: match[1] + record_table(match["record"], match["key"], page, results) + match[5],
+                     text)
     return FIGURE.sub(lambda match: match[1] + figure(match["record"], match["measure"], page, results) + match[5],
                       text)
 

@@ -6,9 +6,11 @@ metrics row and each save, and the loop itself never prints.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 
 from es.loop import Reporter
+from es.runfolder import SaveError
 from report.plots import save_run_plot
 
 
@@ -51,7 +53,32 @@ class GenerationLog(Reporter):
 
 
 class FitnessPlot(Reporter):
-    """Redraws the run's ``fitness.png`` at every save."""
+    """Draws the run's ``fitness.png``: at a save once ``redraw_seconds`` have passed since it last drew (or since
+    the run began), and when the run ends, with every row saved. A drawing costs a good part of a second, the first
+    one more (matplotlib's import): drawn at every save, a run of short generations spent a sizeable share of its
+    time drawing pictures nobody looked at before the next one."""
+
+    def __init__(self, redraw_seconds: float = 30.0, clock: Callable[[], float] = time.monotonic):
+        self.redraw_seconds, self.clock = redraw_seconds, clock
+        self.drawn_at = clock()
+        self.pending: tuple[object, list[dict]] | None = None  # the folder and rows of a save not drawn yet
 
     def saved(self, folder, rows: list[dict]) -> None:
-        folder.write(save_run_plot, "fitness.png", rows, folder.name)
+        self.pending = (folder, list(rows))
+        if self.clock() - self.drawn_at >= self.redraw_seconds:
+            self.draw()
+
+    def finished(self, folder) -> None:
+        self.draw()  # before the loggers, after it in the list of reporters, send the run's figures
+
+    def close(self) -> None:
+        try:
+            self.draw()
+        except SaveError:  # a run stopping on a full disk: its data are saved, the picture is not worth a traceback
+            pass
+
+    def draw(self) -> None:
+        if self.pending is not None:
+            folder, rows = self.pending
+            folder.write(save_run_plot, "fitness.png", rows, folder.name)
+            self.pending, self.drawn_at = None, self.clock()

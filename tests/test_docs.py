@@ -69,7 +69,7 @@ EXTRAS = {
     "stats": (("rliable", "arch", "pandas"),
               lambda script, args: script.endswith("report_runs.py")
               or (script.endswith("paper.py") and "report" in args)),
-    "bench": (("evotorch",), lambda script, args: script.endswith("vs_evotorch.py")),
+    "bench": (("evotorch",), lambda script, args: "evotorch" in Path(script).name),
 }
 
 
@@ -84,7 +84,7 @@ def logged(args: list[str]) -> list[str]:
 # budgets: flag -> tiny value
 SHRINK = {"--generations": "1", "--popsize": "2", "--episodes": "1", "--eval_episodes": "1", "--eval_every": "1",
           "--training_steps": "64", "--training_timesteps": "64", "--HP_training_steps": "64", "--nb_trials": "1",
-          "--nb_seeds": "1", "--seeds": "1", "--rounds": "1", "--steps": "20"}
+          "--nb_seeds": "1", "--seeds": "1", "--rounds": "1", "--steps": "20", "--budget": "300"}
 TRAIN_SCRIPTS = ("train_static.py", "train_hebb.py")
 EXPERIMENT_SCRIPTS = ("experiments/paper.py", "experiments/reservoir_front/compare.py")
 # documented commands that fail for a known reason being fixed elsewhere
@@ -598,6 +598,46 @@ def test_a_figure_that_cannot_be_published_is_refused(tmp_path, kind, message):
     text = f"<!-- figure:{kind} {measure} --><!-- end figure -->"
     with pytest.raises(generate.FigureError, match=message):
         generate.render_figures(text, ROOT / "README.md", tmp_path)
+
+
+def a_table_record(folder: Path, name: str, loaded: bool = False) -> Path:
+    path = a_record(folder, name, loaded)
+    body = json.loads(path.read_text())
+    body["notes"]["results"] = {"columns": ["row", "population", "budget", "σ", "steps", "P"],
+                                "rows": [["snes", 64, 1000000, 0.02394, {"value": 20513.4, "low": 15870, "high": 26011},
+                                          {"value": 0.625, "low": 0.4, "high": 0.85, "digits": 2}]]}
+    path.write_text(json.dumps(body))
+    return path
+
+
+def test_a_records_table_is_rendered_with_its_intervals_and_machine(tmp_path):
+    a_table_record(tmp_path, "solve")
+    page = ROOT / "docs" / "strategies.md"
+    text = "<!-- table:solve results -->\nold\n<!-- end table -->"
+    link = os.path.relpath(tmp_path / "solve.json", page.parent)
+    assert generate.render_figures(text, page, tmp_path) == (
+        "<!-- table:solve results -->\n| row | population | budget | σ | steps | P |\n|---|---|---|---|---|---|\n"
+        "| snes | 64 | 1,000,000 | 0.024 | 20,513 [15,870, 26,011] | 0.62 [0.40, 0.85] |\n\n"
+        f"[AMD EPYC, 2 cores, 2026-01-01]({link})\n<!-- end table -->")
+    a_table_record(tmp_path, "busy", loaded=True)
+    with pytest.raises(generate.FigureError, match="loaded"):
+        generate.render_figures("<!-- table:busy results -->\n<!-- end table -->", page, tmp_path)
+    with pytest.raises(generate.FigureError, match="no table 'settings'"):
+        generate.render_figures("<!-- table:solve settings -->\n<!-- end table -->", page, tmp_path)
+
+
+def test_a_record_of_counts_is_never_loaded(tmp_path, monkeypatch):
+    """Steps to solve from seeded runs do not move with the load: such a record (timed=False) keeps its load
+    but is not marked loaded; a timed one taken at the same load is."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import record as records
+
+    monkeypatch.setattr(records, "load", lambda: 9.0)
+    for timed in (False, True):
+        made = records.Record(f"counts{timed}", timed=timed)
+        made.add("steps", "steps to solve", "steps", [1, 2, 3, 4, 5])
+        body = json.loads(made.write(tmp_path).read_text())
+        assert body["timed"] is timed and body["loaded"] is timed and body["load_before"] == 9.0
 
 
 def test_every_benchmark_writes_a_record():

@@ -16,7 +16,9 @@ import pytest
 import plot_run
 import train_static
 from es import files
+from es.runfolder import SaveError
 from report import plots
+from report.log import FitnessPlot
 from report.progress import LiveDisplay, QuietDisplay, display_for, estimate
 from tests.run_helpers import Training, hint, only_run
 
@@ -111,10 +113,47 @@ def test_output_that_is_not_a_terminal_is_one_line_per_generation(piped_run):
     assert not any("\r" in line for line in lines)
 
 
-def test_every_save_draws_the_learning_curve(piped_run):
+def test_the_run_draws_its_learning_curve(piped_run):
     run_dir, _ = piped_run
     assert (run_dir / "fitness.png").read_bytes().startswith(PNG_SIGNATURE)
     assert not list(run_dir.glob(".*.tmp"))
+
+
+class DrawnFolder:
+    """A run folder that counts what is drawn into it; ``full`` makes every write fail as a full disk does."""
+
+    name = "run"
+
+    def __init__(self):
+        self.drawn, self.full = [], False
+
+    def write(self, write, name, rows, title):
+        if self.full:
+            raise SaveError(f"cannot write {name}: No space left on device")
+        self.drawn.append([row["generation"] for row in rows])
+
+
+def test_the_learning_curve_is_drawn_at_most_every_redraw_seconds_and_at_the_end():
+    """A save draws once redraw_seconds have passed since the last drawing (or the start); the run's end draws
+    every row saved; nothing is drawn twice, and a full disk at the end does not raise."""
+    now = [0.0]
+    plot, folder = FitnessPlot(redraw_seconds=30.0, clock=lambda: now[0]), DrawnFolder()
+    rows = []
+    for generation, at in enumerate((5.0, 10.0, 31.0, 40.0, 45.0), 1):
+        now[0] = at
+        rows.append({"generation": generation})
+        plot.saved(folder, rows)
+    assert folder.drawn == [[1, 2, 3]]  # at 31 s: 30 s after the start
+    plot.finished(folder)
+    assert folder.drawn == [[1, 2, 3], [1, 2, 3, 4, 5]]
+    plot.close()
+    assert len(folder.drawn) == 2  # nothing new to draw
+    rows.append({"generation": 6})
+    plot.saved(folder, rows)
+    folder.full = True
+    plot.close()  # an interrupted run on a full disk: its data are saved, no traceback for the picture
+    with pytest.raises(SaveError):
+        plot.finished(folder)  # a finished run says the picture could not be written
 
 
 def test_curves_keep_the_best_so_far_across_nan_generations():
