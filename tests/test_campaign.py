@@ -119,14 +119,14 @@ def test_a_chunk_committed_and_continued_in_a_clone_is_the_uninterrupted_run(tmp
 
 
 def test_a_budget_stops_at_a_generation_boundary_with_everything_saved(tmp_path):
-    started = time.monotonic()
     result = paper(*SMALL, "--generations", "1000", folder=tmp_path / "runs" / "x", budget=0.25)
-    elapsed = time.monotonic() - started
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
-    assert elapsed < 15 + 30 + 20  # the budget, the grace a generation gets, start and stop
     run = run_of(tmp_path / "runs" / "x")
     done = read_checkpoint(run / "checkpoint.npz").generation
     assert done >= 1 and generations_recorded(run) == list(range(1, done + 1))
+    with open(run / "metrics.csv", newline="") as handle:
+        trained = float(list(csv.DictReader(handle))[-1]["total_seconds"])
+    assert trained <= 0.25 * 60  # the generations saved all ended within the budget, whatever the machine's load
     assert f"generation {done} of 1000, saved" in result.stdout
     assert {path.name for path in run.iterdir()} == KEPT_WHILE_RUNNING
     assert not (tmp_path / "runs" / "campaign.pid").exists()
