@@ -74,14 +74,20 @@ class Timed:
 
 
 def timed(command: list[str], log: Path) -> float:
-    """Run ``command`` (output to ``log``) and return its wall time; SystemExit naming the log if it fails."""
+    """Run ``command`` (output to ``log``) and return its wall time. A command that refuses its arguments (exit
+    2: a user's error, such as an unknown environment) ends this one with its one line and exit 2; one that
+    fails otherwise, with the end of its output (the log lies in a folder removed on exit)."""
     with log.open("w") as output:
         started = time.perf_counter()
         code = subprocess.run(command, cwd=ROOT, stdout=output, stderr=subprocess.STDOUT).returncode
         wall = time.perf_counter() - started
     if code:
-        raise SystemExit(f"vs_evotorch_speed.py: error: {' '.join(command[1:3])} ... exited {code}; its output: "
-                         f"{log}\n{log.read_text()[-2000:]}")
+        lines = log.read_text().strip().splitlines() or [f"{Path(command[1]).name} exited {code}"]
+        if code == 2:
+            print(lines[-1], file=sys.stderr)
+            raise SystemExit(2)
+        raise SystemExit(f"vs_evotorch_speed.py: error: {Path(command[1]).name} exited {code}; its output ends:\n"
+                         + "\n".join(lines[-30:]))
     return wall
 
 

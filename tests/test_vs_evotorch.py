@@ -191,3 +191,14 @@ def test_speed_command_times_both_commands(tmp_path):
                                        "this_tool_generation", "evotorch_generation"}
     assert all(value > 0 for measure in record["measures"].values() for value in measure["values"])
     assert all(steps > 0 for tool in ("this tool", "EvoTorch") for steps in record["notes"]["steps"][tool])
+
+
+def test_speed_command_refused_by_a_training_command_ends_in_its_one_line(tmp_path, capsys):
+    """An environment the training scripts do not know: their one-line refusal, exit 2, no record."""
+    with pytest.raises(SystemExit) as stop:
+        vs_evotorch_speed.main(["--environment", "Nope-v0", "--popsize", "4", "--generations", "1", "--rounds", "1",
+                                "--results", str(tmp_path)])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "unknown environment 'Nope-v0'" in err
+    assert not list(tmp_path.iterdir())
