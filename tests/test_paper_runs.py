@@ -1,0 +1,73 @@
+"""The campaign's committed runs (results/paper/<experiment>_<kind>_seed<N>/<run>/) are the paper's command made
+by this code: each run's recorded settings are its experiment file's with its seed, and training that command
+again gives the run's first generations row for row, every column of metrics.csv but the timings. This is
+the check a reader of the shipped results makes (experiments/README.md, "Checking the shipped runs"); it fails
+the day a change to the code moves the campaign's numbers.
+"""
+
+from __future__ import annotations
+
+import csv
+import importlib
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from cli.config import TrainConfig
+from cli.hints import TRAIN_SCRIPTS
+from cli.train import config_from_args
+from es.files import read_json
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "results" / "paper"
+RUNS = sorted(path.parent for path in RESULTS.glob("*_*_seed*/*/metrics.csv"))
+GENERATIONS = 2  # each about 10 s of CarRacing on one worker: random networks end their episodes early
+DERIVED = {"noise_size"}  # filled in by the training (the noise table's size), not given
+
+
+def experiment_of(run: Path) -> tuple[str, str, int]:
+    """``results/paper/carracing_hebbian_seed1/<run>`` -> ("carracing", "hebbian", 1)."""
+    experiment, kind, seed = run.parent.name.split("_")
+    return experiment, kind, int(seed.removeprefix("seed"))
+
+
+def paper_command(run: Path) -> list[str]:
+    """The campaign's command for this run (experiments/paper.py's ``train_command`` for a new run)."""
+    experiment, kind, seed = experiment_of(run)
+    return [TRAIN_SCRIPTS[kind], "--config", f"experiments/paper/{experiment}_{kind}.toml", "--seed", str(seed),
+            "--folder", str(run.parent.relative_to(ROOT))]
+
+
+def rows_without_timings(path: Path, count: int) -> list[dict]:
+    with open(path, newline="") as handle:
+        return [{key: value for key, value in row.items() if "seconds" not in key}
+                for row in csv.DictReader(handle)][:count]
+
+
+def run_id(run: Path) -> str:
+    return run.parent.name
+
+
+@pytest.mark.parametrize("run", RUNS, ids=run_id)
+def test_a_committed_run_has_the_papers_settings(run):
+    _, kind, _ = experiment_of(run)
+    script, *words = paper_command(run)
+    parser = importlib.import_module(Path(script).stem).build_parser()
+    asked = config_from_args(kind, parser.parse_args(words)).fixed()
+    recorded = TrainConfig.from_dict(read_json(run / "config.json")).fixed()
+    differing = {key: (recorded.get(key), asked.get(key)) for key in {*recorded, *asked} - DERIVED
+                 if recorded.get(key) != asked.get(key)}
+    assert differing == {}, f"{run}: settings that are not the paper's command (recorded, asked): {differing}"
+
+
+@pytest.mark.parametrize("run", RUNS, ids=run_id)
+def test_the_papers_command_gives_a_committed_runs_first_generations_again(run, tmp_path):
+    script, *words = paper_command(run)
+    words[words.index("--folder") + 1] = str(tmp_path)
+    subprocess.run([sys.executable, script, *words, "--generations", str(GENERATIONS), "--threads", "1"], cwd=ROOT,
+                   env={**os.environ, "SDL_VIDEODRIVER": "dummy"}, check=True, capture_output=True, timeout=600)
+    (again,) = tmp_path.glob("*/metrics.csv")
+    assert rows_without_timings(again, GENERATIONS) == rows_without_timings(run / "metrics.csv", GENERATIONS)
