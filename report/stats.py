@@ -95,9 +95,9 @@ def evaluation_score(run_dir: Path, environment: str | None = None) -> float:
                          f"{path}, or use --score final)")
     try:
         reports = files.read_json(path)["environments"]
-        chosen = [report for report in reports if environment in (None, report["env_id"])]
+        chosen = [report for report in reports if environment in (None, report["environment"])]
         if not chosen:
-            found = ", ".join(report["env_id"] for report in reports)
+            found = ", ".join(report["environment"] for report in reports)
             raise StatsError(f"{path} has no environment {environment}; it has {found}")
         returns = [float(value) for report in chosen for value in report["returns"]]
     except (KeyError, TypeError, ValueError, json.JSONDecodeError) as error:

@@ -1,7 +1,8 @@
 """report/stats.py and report_runs.py on hand-made run folders, against the statistics computed plainly.
 
 The run folders are real: metrics.csv written by the project's own writer (es.files.write_metrics),
-config.json and evaluation.json as the scripts write them. rliable is the optional statistics extra.
+config.json and evaluation.json as the scripts write them (and one evaluation.json written by
+evaluate_static.py itself). rliable is the optional statistics extra.
 """
 
 from __future__ import annotations
@@ -47,7 +48,7 @@ def make_run(folder: Path, name: str, centres: list[float], env: str = "CartPole
     files.write_metrics(run / "metrics.csv", rows)
     files.write_json(run / "config.json", {"env": {"env_ids": [env]}, "run": {"seed": 1}})
     if returns is not None:
-        files.write_json(run / "evaluation.json", {"environments": [{"env_id": env, "returns": returns}]})
+        files.write_json(run / "evaluation.json", {"environments": [{"environment": env, "returns": returns}]})
     return run
 
 
@@ -82,6 +83,25 @@ def test_scores_of_a_run(tmp_path):
     assert stats.evaluation_score(make_run(tmp_path, "eval", [1.0], returns=[3.0, 4.0, 8.0])) == 5.0
     with pytest.raises(stats.StatsError, match="no evaluation.json"):
         stats.evaluation_score(plain)
+
+
+def test_the_evaluation_score_reads_what_the_evaluate_script_writes(tmp_path):
+    """evaluation.json as evaluate_static.py --json writes it, not a hand-made one: the score is the mean of the
+    returns it holds, over all its environments or of the one named; another name is refused, naming those it
+    has."""
+    python = [sys.executable]
+    subprocess.run([*python, "train_static.py", "--environment", "CartPole-v1", "--popsize", "4", "--generations",
+                    "1", "--threads", "1", "--seed", "3", "--folder", str(tmp_path)],
+                   cwd=ROOT, check=True, capture_output=True, timeout=600)
+    (run,) = [path for path in tmp_path.iterdir() if path.is_dir()]
+    subprocess.run([*python, "evaluate_static.py", "--path_weights", str(run), "--episodes", "3", "--json",
+                    str(run / "evaluation.json")], cwd=ROOT, check=True, capture_output=True, timeout=600)
+    (written,) = files.read_json(run / "evaluation.json")["environments"]
+    assert len(written["returns"]) == 3
+    assert stats.evaluation_score(run) == float(np.mean(written["returns"]))
+    assert stats.evaluation_score(run, "CartPole-v1") == float(np.mean(written["returns"]))
+    with pytest.raises(stats.StatsError, match="has no environment Pendulum-v1; it has CartPole-v1"):
+        stats.evaluation_score(run, "Pendulum-v1")
 
 
 def test_iqm_and_mean_exact_with_their_intervals(tmp_path, rliable):
@@ -191,7 +211,7 @@ def test_paper_report_static_against_hebbian(tmp_path, rliable):
         for seed in (1, 2, 3, 4):
             run = make_run(tmp_path / f"ant_{kind}_seed{seed}", f"2026_run_seed{seed}", [0.0], env="AntBulletEnv-v0")
             (run / "checkpoint.npz").write_bytes(b"")  # what marks a run folder for experiments/paper.py
-            evaluations = [{"env_id": body, "returns": [value + seed for value in values]}
+            evaluations = [{"environment": body, "returns": [value + seed for value in values]}
                            for body, values in zip(bodies, per_body)]
             files.write_json(run / "evaluation.json", {"environments": evaluations})
     done = subprocess.run([sys.executable, "experiments/paper.py", "ant", "report", "--runs", str(tmp_path),
