@@ -49,6 +49,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # the project's modules, when run as a script
 
+import envs  # noqa: E402
 from cli.errors import USER_ERRORS, Parser, say  # noqa: E402
 from cli.flags import non_empty, positive_float, positive_int, seed_value, threads_value  # noqa: E402
 from cli.hints import EVALUATE_SCRIPTS, TRAIN_SCRIPTS  # noqa: E402
@@ -195,7 +196,9 @@ def report(args: argparse.Namespace) -> int:
               f"{stats.INSTALL_HINT}", file=sys.stderr)
         return 2
     with open(FILES / f"{args.experiment}_static.toml", "rb") as handle:
-        environments = tomllib.load(handle)["evaluation"]["environment"].split(",")
+        named = tomllib.load(handle)["evaluation"]["environment"].split(",")
+    # as evaluation.json names them: the ids they resolve to (CarRacing-v0 -> CarRacing-v3)
+    environments = [envs.resolve_env_id(env_id, notify=lambda *_: None) for env_id in named]
     groups = []
     for kind in TRAIN_SCRIPTS:
         runs = [run for folder in sorted(args.runs.glob(f"{args.experiment}_{kind}_seed*"))

@@ -227,3 +227,28 @@ def test_paper_report_static_against_hebbian(tmp_path, rliable):
     with open(tmp_path / "ant_report" / bodies[2] / "improvement.csv", newline="") as handle:
         pairs = {(row["x"], row["y"]): float(row["probability"]) for row in csv.DictReader(handle)}
     assert pairs["hebbian", "static"] == 1.0  # on the unseen body every Hebbian run beats every static one
+
+
+def test_paper_report_of_real_carracing_runs(tmp_path, rliable):
+    """experiments/paper.py carracing report over runs that paper.py itself trained and evaluated (small ones):
+    the experiment file's CarRacing-v0 is the evaluation's CarRacing-v3, and each kind's mean is the mean of its
+    runs' evaluation means."""
+    scores = {}
+    for kind in ("static", "hebbian"):
+        for seed in (1, 2):
+            folder = tmp_path / f"carracing_{kind}_seed{seed}"
+            subprocess.run([sys.executable, "experiments/paper.py", "carracing", kind, "--seed", str(seed),
+                            "--popsize", "4", "--generations", "1", "--episodes", "2", "--threads", "1", "--folder",
+                            str(folder)], check=True, cwd=ROOT, capture_output=True, timeout=600)
+            (evaluation,) = folder.glob("*/evaluation.json")
+            (written,) = files.read_json(evaluation)["environments"]
+            scores.setdefault(kind, []).append(float(np.mean(written["returns"])))
+    done = subprocess.run([sys.executable, "experiments/paper.py", "carracing", "report", "--runs", str(tmp_path),
+                           "--reps", str(REPS)], check=False, cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    assert "## CarRacing-v3" in done.stdout
+    with open(tmp_path / "carracing_report" / "CarRacing-v3" / "summary.csv", newline="") as handle:
+        rows = {row["group"]: row for row in csv.DictReader(handle)}
+    for kind, values in scores.items():
+        assert int(rows[kind]["runs"]) == 2
+        assert float(rows[kind]["mean"]) == pytest.approx(np.mean(values))
