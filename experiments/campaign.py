@@ -35,7 +35,7 @@ GRACE = 30.0  # seconds a generation may take to finish after the first SIGINT, 
 POLL = 0.5  # seconds between looks at the child and at metrics.csv
 SAFETY = 1.15  # a generation may take this much longer than the last one did
 # what a run folder keeps between chunks: what continuing needs, and what evaluating wrote
-KEPT = ("config.json", "checkpoint.npz", "metrics.csv", "evaluation.json", "adaptation.png")
+KEPT = ("config.json", "checkpoint.npz", "metrics.csv", "evaluation.json", "adaptation.png", "frames.png")
 FINAL_WEIGHTS = "last*.dat"  # kept once training is complete: the weights evaluated and shipped
 
 

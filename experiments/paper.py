@@ -61,6 +61,7 @@ from report.stats import DEFAULT_REPS  # noqa: E402
 FILES = ROOT / "experiments" / "paper"
 CAMPAIGN = FILES / "campaign.toml"  # the campaign's runs, in order
 RESULTS = Path("results") / "paper"  # the campaign's run folders, relative to the repository's root
+FRAMES = "frames.png"  # the first evaluation episode, every 100th frame (--video PATH.png)
 HELD_OUT_SEED = 2**31  # the evaluation's first episode seed: training draws its seeds below 2**31 - 1, never these
 EXPERIMENTS = sorted({path.stem.split("_")[0] for path in FILES.glob("*_*.toml")})
 
@@ -152,12 +153,15 @@ def check_training(kind: str, command: list[str]) -> None:
 
 
 def evaluate_command(args: argparse.Namespace, experiment: dict, run_dir: Path) -> list[str]:
-    """The final weights (last*.dat) on every body; statistics to JSON, one episode to a PNG."""
+    """The final weights (last*.dat) on every body; statistics to JSON, one episode to a PNG, and where the
+    experiment file asks for ``frames``, that episode's every 100th frame to a strip."""
     evaluation = experiment["evaluation"]
     command = [sys.executable, str(ROOT / EVALUATE_SCRIPTS[args.kind]), "--environment", evaluation["environment"],
                "--episodes", str(args.episodes if args.episodes is not None else evaluation["episodes"]),
                "--seed", str(HELD_OUT_SEED),
                "--json", str(run_dir / "evaluation.json"), "--plot", str(run_dir / "adaptation.png")]
+    if evaluation.get("frames"):
+        command += ["--video", str(run_dir / FRAMES)]
     # the run's main file: the evaluate script takes the rule, the network and the files beside it (a CNN,
     # co-evolved initial weights) from the run folder
     main = KINDS[args.kind].files[0]

@@ -111,8 +111,13 @@ def test_a_chunk_committed_and_continued_in_a_clone_is_the_uninterrupted_run(tmp
     assert continued.returncode == 0, continued.stdout[-2000:] + continued.stderr[-2000:]
     assert f"resuming {clone / relative} at generation {done} of {total}" in continued.stdout
     assert numbers(clone / relative) == numbers(run_of(tmp_path / "whole"))
-    assert {path.name for path in (clone / relative).iterdir()} == {
-        *KEPT_WHILE_RUNNING, "evaluation.json", "adaptation.png", "last_coeffs.dat", "last_CNN_parameters.dat"}
+    finished = {*KEPT_WHILE_RUNNING, "evaluation.json", "adaptation.png", "frames.png", "last_coeffs.dat",
+                "last_CNN_parameters.dat"}
+    assert {path.name for path in (clone / relative).iterdir()} == finished
+    assert (clone / relative / "frames.png").read_bytes() == (run_of(tmp_path / "whole") / "frames.png").read_bytes()
+    git("add", "-A", cwd=clone)  # the finished run is committed whole: the weights, the evaluation, its pictures
+    assert set(git("ls-files", cwd=clone).split()) == {"results/paper/.gitignore",
+                                                        *(f"{relative}/{name}" for name in finished)}
     assert (clone / relative / "evaluation.json").read_text() == (run_of(tmp_path / "whole") /
                                                                    "evaluation.json").read_text().replace(
         str(run_of(tmp_path / "whole")), str(clone / relative))
@@ -184,14 +189,15 @@ def test_a_stale_pid_file_is_taken_over(tmp_path):
 
 
 def test_prune_keeps_what_continuing_and_evaluating_need(tmp_path):
-    names = ["config.json", "checkpoint.npz", "metrics.csv", "evaluation.json", "adaptation.png", "last_coeffs.dat",
+    names = ["config.json", "checkpoint.npz", "metrics.csv", "evaluation.json", "adaptation.png", "frames.png",
+             "last_coeffs.dat",
              "last_CNN_parameters.dat", "best_coeffs.dat", "HEBcoeffs__CarRacing-v0__rew_5__coeffs__3.dat", ".lock",
              "fitness.png", "Fitness_values_run_CarRacing-v0.npy"]
     for name in names:
         (tmp_path / name).write_text("x")
     removed = prune(tmp_path, complete=False)
-    assert sorted(path.name for path in tmp_path.iterdir()) == sorted(names[:5])
-    assert set(removed) == set(names[5:])
+    assert sorted(path.name for path in tmp_path.iterdir()) == sorted(names[:6])
+    assert set(removed) == set(names[6:])
     (tmp_path / "last.dat").write_text("x")
     (tmp_path / "best.dat").write_text("x")
     assert prune(tmp_path, complete=True) == ["best.dat"]
