@@ -35,7 +35,7 @@ from es.interrupts import honour_sigint
 from es.observations import SavedStatistics, load_statistics, statistics_path
 from es.outputs import JSON_SUFFIXES
 from es.outputs import check_outputs as check_paths
-from es.runfolder import named_file
+from es.runfolder import named_file, read_checkpoint
 from policies import KINDS
 from report.plots import FIGURE_SUFFIXES
 from report.video import STRIP_EVERY, VIDEO_SUFFIXES
@@ -51,7 +51,8 @@ def evaluation_parser(prog: str, description: str, kind: str) -> Parser:
     add = parser.add_argument
     main, *others = KINDS[kind].files
     add(main.flag, required=True, metavar="FILE",
-        help=f"the .dat file of {main.holds}, or a run folder (its {named_file('last', main.roles[0])})")
+        help=f"the .dat file of {main.holds}, or a run folder (its {named_file('last', main.roles[0])}), or a "
+             "folder of run folders (the newest run's)")
     for file in others:
         add(file.flag, default=None, metavar="FILE",
             help=f"the .dat file of {file.holds} (default: in a run folder, the one beside the {main.holds})")
@@ -150,9 +151,25 @@ def saved_statistics(weight_file: Path) -> SavedStatistics | None:
 
 
 def main_file(kind: str, given: str) -> Path:
-    """The file the script reads first: the one given, or in a run folder given as such its ``last`` file."""
+    """The file the script reads first: the one given; in a run folder given as such, its ``last`` file; in a
+    folder of run folders (training's --folder, such as results/paper/carracing_hebbian_seed1), the newest run's
+    (run folders are named by the time they started)."""
     path = Path(given)
-    return path / named_file("last", KINDS[kind].files[0].roles[0]) if (path / "config.json").is_file() else path
+    if path.is_dir() and not (path / "config.json").is_file():
+        runs = sorted(run for run in path.iterdir() if (run / "config.json").is_file())
+        if runs:
+            path = runs[-1]
+            say(f"run: {path}" + (f" (the newest of {len(runs)} in {given})" if len(runs) > 1 else ""))
+    if not (path / "config.json").is_file():
+        return path
+    last = path / named_file("last", KINDS[kind].files[0].roles[0])
+    if not last.exists() and (path / "checkpoint.npz").is_file():  # a campaign's run keeps only its checkpoint
+        done = read_checkpoint(path / "checkpoint.npz").generation
+        total = read_json(path / "config.json").get("run", {}).get("generations", "?")
+        raise UserError(f"{path} has no {last.name}: the run is at generation {done} of {total}, and a campaign "
+                        "keeps only its checkpoint until training is complete; continue it (python experiments/"
+                        "paper.py campaign --budget MINUTES) or evaluate another run")
+    return last
 
 
 def recorded_config(kind: str, weight_file: Path) -> TrainConfig | None:

@@ -195,3 +195,37 @@ def test_impossible_outputs_are_one_line_and_exit_2(tmp_path, capsys, extra, mes
     assert code == 2
     assert capsys.readouterr().err.strip().splitlines() == [
         f"evaluate_static.py: error: {message.format(folder=tmp_path)}"]
+
+
+def test_a_folder_of_runs_evaluates_its_newest_run(tmp_path):
+    """``--path_weights FOLDER`` where FOLDER holds run folders (training's --folder): the newest run's last.dat,
+    named in one line; the same numbers as that run folder given itself."""
+    for seed in ("1", "2"):  # two runs in one folder, named by the time they started
+        done = run_script("train_static.py", "--environment", "CartPole-v1", "--popsize", "4", "--generations", "1",
+                          "--threads", "1", "--seed", seed, "--folder", str(tmp_path))
+        assert done.returncode == 0, done.stderr
+    runs = sorted(path for path in tmp_path.iterdir() if path.is_dir())
+    assert len(runs) == 2
+    by_folder = run_script("evaluate_static.py", "--path_weights", str(tmp_path), "--episodes", "2")
+    by_run = run_script("evaluate_static.py", "--path_weights", str(runs[-1]), "--episodes", "2")
+    assert by_folder.returncode == 0, by_folder.stderr
+    assert f"run: {runs[-1]} (the newest of 2 in {tmp_path})" in by_folder.stdout
+    assert by_folder.stdout.splitlines()[-1] == by_run.stdout.splitlines()[-1]
+
+
+def test_a_campaign_run_still_training_is_refused_in_one_line(tmp_path):
+    """A campaign keeps only config.json, checkpoint.npz and metrics.csv until training is complete: evaluating
+    such a run says so, with how far it got and how to continue it."""
+    done = run_script("train_static.py", "--environment", "CartPole-v1", "--popsize", "4", "--generations", "2",
+                      "--threads", "1", "--seed", "1", "--folder", str(tmp_path))
+    assert done.returncode == 0, done.stderr
+    (run,) = [path for path in tmp_path.iterdir() if path.is_dir()]
+    for path in run.iterdir():
+        if path.name not in ("config.json", "checkpoint.npz", "metrics.csv"):
+            path.unlink()
+    refused = run_script("evaluate_static.py", "--path_weights", str(run))
+    assert refused.returncode == 2
+    assert refused.stderr.splitlines() == [
+        f"evaluate_static.py: error: {run} has no last.dat: the run is at generation 2 of 2, and a campaign keeps "
+        "only its checkpoint until training is complete; continue it (python experiments/paper.py campaign "
+        "--budget MINUTES) or evaluate another run"]
