@@ -17,6 +17,13 @@ its record (``Record.table``: the settings and results of ``benchmarks/vs_evotor
 interval ("20,513 [15,870, 26,011]"), followed by the machine and the link to the record. A loaded record is
 refused here too.
 
+Between ``<!-- result:RUN [ENVIRONMENT] -->`` and ``<!-- end result -->`` a page holds the evaluation of a
+campaign run, ``results/paper/RUN`` (``carracing_hebbian_seed1``; its newest run folder): the mean ± std of
+its evaluation.json (of ENVIRONMENT, where it evaluated several), its episodes and generation, linked to the
+file and to the run's weights; until the run is evaluated, ``PENDING``. ``<!-- frames:RUN -->`` and
+``<!-- end frames -->`` hold its frames.png the same way. A run evaluated since its page was written is
+reported by ``--check`` as behind, not refused: the figures a page shows are always its files'.
+
 ``python docs/generate.py`` rewrites the tables and figures of every page; ``--check`` rewrites nothing and
 exits 1 naming the pages that differ (tests/test_docs.py runs the same check).
 """
@@ -36,6 +43,9 @@ for folder in (ROOT, ROOT / "benchmarks"):
         sys.path.insert(0, str(folder))
 
 import record as records  # noqa: E402  (benchmarks/record.py: what a record holds)
+
+from es.files import read_json, read_metrics  # noqa: E402
+from es.runfolder import read_checkpoint  # noqa: E402
 
 MARKER = re.compile(r"(<!-- flags:(?P<script>\S+)(?: except (?P<other>\S+))? -->\n)(?P<table>.*?)(<!-- end flags -->)",
                     re.DOTALL)
@@ -185,11 +195,74 @@ def render_figures(text: str, page: Path, results: Path = records.RESULTS) -> st
                       text)
 
 
-def render(text: str, page: Path | None = None) -> str:
+RUNS = ROOT / "results" / "paper"  # the campaign's run folders
+RESULT = re.compile(r"(?<!`)(<!-- result:(?P<run>[\w.-]+)(?: (?P<environment>[\w.:-]+))? -->)(?P<text>.*?)"
+                    r"(?P<end><!-- end result -->)")
+FRAMES = re.compile(r"(?<!`)(<!-- frames:(?P<run>[\w.-]+) -->)(?P<text>.*?)(?P<end><!-- end frames -->)")
+PENDING = "not yet: training in the campaign"
+FRAMES_PENDING = "(the agent's frames, once its run is evaluated)"
+HELD_OUT = 2**31  # the first episode seed no training uses (experiments/paper.py)
+
+
+def evaluated(name: str, runs: Path) -> Path | None:
+    """The newest run folder of ``runs/name`` (as experiments/paper.py picks it), if it has been evaluated."""
+    found = sorted(path.parent for path in (runs / name).glob("*/checkpoint.npz"))
+    return found[-1] if found and (found[-1] / "evaluation.json").is_file() else None
+
+
+def link(path: Path, page: Path) -> str:
+    return Path(os.path.relpath(path, page.parent)).as_posix()
+
+
+def result(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
+    """One campaign run's evaluation: "**903 ± 45.1** (100 episodes on held-out seeds, generation 300 after 7.31 h
+    of training, weights)"; the hours are the sum of metrics.csv's ``seconds``."""
+    run = evaluated(name, runs)
+    if run is None:
+        return PENDING
+    evaluation = read_json(run / "evaluation.json")
+    entries = evaluation["environments"]
+    chosen = [entry for entry in entries if environment in (None, entry["environment"])]
+    if len(chosen) != 1:
+        found = ", ".join(entry["environment"] for entry in entries)
+        raise FigureError(f"{name}: {'no' if not chosen else 'several'} environment{'' if environment else 's'} "
+                          f"{environment or ''} in {run / 'evaluation.json'} ({found}); name one in the marker")
+    (entry,) = chosen
+    seeds = "on held-out seeds" if evaluation["seed"] >= HELD_OUT else f"from seed {evaluation['seed']}"
+    generation = read_checkpoint(run / "checkpoint.npz").generation
+    hours = sum(float(row["seconds"]) for row in read_metrics(run / "metrics.csv")
+                if int(row["generation"]) <= generation) / 3600
+    return (f"**{number(entry['mean'])} ± {number(entry['std'])}** ([{entry['episodes']} episodes {seeds}]"
+            f"({link(run / 'evaluation.json', page)}), generation {generation} after {number(hours)} h of training, "
+            f"[weights]({link(run, page)}))")
+
+
+def frames(name: str, page: Path, runs: Path = RUNS) -> str:
+    run = evaluated(name, runs)
+    if run is None or not (run / "frames.png").is_file():
+        return FRAMES_PENDING
+    return f"![{name}: every 100th frame of its first evaluation episode]({link(run / 'frames.png', page)})"
+
+
+def render_results(text: str, page: Path, runs: Path = RUNS, behind: list[str] | None = None) -> str:
+    """``text`` with every campaign result and frame strip rewritten from its run; given ``behind`` (a check),
+    a marker that still reads as pending while its run has been evaluated is left as it is, and named there."""
+    def rewrite(match: re.Match, rendered: str, pending: str) -> str:
+        if behind is not None and match["text"] == pending and rendered != pending:
+            behind.append(match["run"])
+            rendered = pending
+        return match[1] + rendered + match["end"]
+
+    text = RESULT.sub(lambda match: rewrite(match, result(match["run"], match["environment"], page, runs), PENDING),
+                      text)
+    return FRAMES.sub(lambda match: rewrite(match, frames(match["run"], page, runs), FRAMES_PENDING), text)
+
+
+def render(text: str, page: Path | None = None, behind: list[str] | None = None) -> str:
     """``text`` with every flag table rewritten from the parsers, and, given its ``page``, every figure from
-    its record."""
+    its record and every campaign result from its run (``behind``: ``render_results``)."""
     text = MARKER.sub(lambda match: match[1] + table(match["script"], match["other"]) + match[5], text)
-    return text if page is None else render_figures(text, page)
+    return text if page is None else render_results(render_figures(text, page), page, behind=behind)
 
 
 def pages() -> list[Path]:
@@ -201,11 +274,14 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     parser.add_argument("--check", action="store_true", help="write nothing; exit 1 if a table differs")
     args = parser.parse_args(argv)
-    stale, refused = [], []
+    stale, refused, behind = [], [], []
     for page in pages():
         text = page.read_text()
         try:
-            generated = render(text, page)
+            late = []
+            generated = render(text, page, late if args.check else None)
+            if late:
+                behind.append(f"{page.relative_to(ROOT)} ({', '.join(late)})")
         except FigureError as error:
             refused.append(f"{page.relative_to(ROOT)}: {error}")
             continue
@@ -215,6 +291,8 @@ def main(argv: list[str] | None = None) -> int:
                 page.write_text(generated)
     if stale:
         print(("differ from the parsers or records: " if args.check else "rewritten: ") + ", ".join(map(str, stale)))
+    if behind:
+        print(f"behind their evaluated campaign runs (python docs/generate.py fills them in): {', '.join(behind)}")
     for line in refused:
         print(f"refused, left as it is: {line}", file=sys.stderr)
     return 1 if refused or (stale and args.check) else 0

@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import atexit
 import contextlib
+import csv
 import glob
 import importlib.util
 import io
@@ -533,15 +534,17 @@ def test_flag_tables_match_the_parsers():
 
 def test_figures_are_their_records():
     """Each measured figure of README.md, experiments/README.md and docs/ is what docs/generate.py renders from
-    its record in benchmarks/results/ now: the record exists, is not marked loaded, has at least 5 rounds."""
+    its record in benchmarks/results/ now: the record exists, is not marked loaded, has at least 5 rounds; and
+    each campaign result is its run's evaluation (or still pending: a run evaluated since is filled in by the
+    next python docs/generate.py, and never shown wrong)."""
     for page in generate.pages():
         text = page.read_text()
         try:
-            rendered = generate.render_figures(text, page)
+            rendered = generate.render_results(generate.render_figures(text, page), page, behind=[])
         except generate.FigureError as error:
             pytest.fail(f"{page.relative_to(ROOT)}: {error}")
         assert rendered == text, (
-            f"{page.relative_to(ROOT)}: a figure differs from its record; run python docs/generate.py")
+            f"{page.relative_to(ROOT)}: a figure differs from its record or campaign run; run python docs/generate.py")
 
 
 # a measured speed typed into a page: 9.3×, 505 µs, 4.3 ms per step, 651 steps/s, 2.0 h on 16 workers (a target is
@@ -624,6 +627,61 @@ def test_a_records_table_is_rendered_with_its_intervals_and_machine(tmp_path):
         generate.render_figures("<!-- table:busy results -->\n<!-- end table -->", page, tmp_path)
     with pytest.raises(generate.FigureError, match="no table 'settings'"):
         generate.render_figures("<!-- table:solve settings -->\n<!-- end table -->", page, tmp_path)
+
+
+@pytest.fixture(scope="module")
+def evaluated_runs(tmp_path_factory) -> Path:
+    """A folder of campaign runs as experiments/paper.py leaves them: one small CarRacing run, trained and
+    evaluated by paper.py itself (config.json, checkpoint, metrics.csv, weights, evaluation.json, frames.png)."""
+    runs = tmp_path_factory.mktemp("paper_runs")
+    subprocess.run([sys.executable, "experiments/paper.py", "carracing", "hebbian", "--popsize", "4", "--generations",
+                    "2", "--episodes", "2", "--threads", "1", "--folder", str(runs / "carracing_hebbian_seed1")],
+                   cwd=ROOT, check=True, capture_output=True, timeout=600,
+                   env={**os.environ, "SDL_VIDEODRIVER": "dummy"})
+    return runs
+
+
+def test_a_campaign_result_is_rendered_from_its_evaluation(evaluated_runs):
+    page = ROOT / "experiments" / "README.md"
+    (run,) = [path for path in (evaluated_runs / "carracing_hebbian_seed1").iterdir() if path.is_dir()]
+    (entry,) = json.loads((run / "evaluation.json").read_text())["environments"]
+    returns = entry["returns"]
+    mean = sum(returns) / len(returns)
+    std = (sum((value - mean) ** 2 for value in returns) / len(returns)) ** 0.5  # over the episodes, as numpy's
+    with open(run / "metrics.csv", newline="") as handle:
+        hours = sum(float(row["seconds"]) for row in csv.DictReader(handle)) / 3600
+    evaluation = os.path.relpath(run / "evaluation.json", page.parent)
+    text = ("| <!-- result:carracing_hebbian_seed1 -->old<!-- end result --> | "
+            "<!-- result:carracing_hebbian_seed1 CarRacing-v3 -->old<!-- end result --> |")
+    rendered = generate.render_results(text, page, evaluated_runs)
+    weights = os.path.relpath(run, page.parent)
+    cell = (f"**{generate.number(mean)} ± {generate.number(std)}** ([2 episodes on held-out seeds]({evaluation}), "
+            f"generation 2 after {generate.number(hours)} h of training, [weights]({weights}))")
+    assert rendered == (f"| <!-- result:carracing_hebbian_seed1 -->{cell}<!-- end result --> | "
+                        f"<!-- result:carracing_hebbian_seed1 CarRacing-v3 -->{cell}<!-- end result --> |")
+    assert generate.render_results(rendered, page, evaluated_runs) == rendered  # the check the pages pass
+    strip = generate.render_results("<!-- frames:carracing_hebbian_seed1 --><!-- end frames -->", page, evaluated_runs)
+    assert f"]({os.path.relpath(run / 'frames.png', page.parent)})<!-- end frames -->" in strip
+    with pytest.raises(generate.FigureError, match=r"no environment CarRacing-v2 in .* \(CarRacing-v3\)"):
+        generate.render_results("<!-- result:carracing_hebbian_seed1 CarRacing-v2 --><!-- end result -->", page,
+                                evaluated_runs)
+
+
+def test_a_campaign_result_not_yet_evaluated_is_pending_and_a_late_page_is_behind(evaluated_runs, tmp_path):
+    page = ROOT / "README.md"
+    pending = f"<!-- result:carracing_static_seed1 -->{generate.PENDING}<!-- end result -->"
+    assert generate.render_results("<!-- result:carracing_static_seed1 -->x<!-- end result -->", page,
+                                   evaluated_runs) == pending  # no such run
+    shutil.copytree(evaluated_runs / "carracing_hebbian_seed1", tmp_path / "carracing_hebbian_seed1")
+    (run,) = [path for path in (tmp_path / "carracing_hebbian_seed1").iterdir() if path.is_dir()]
+    (run / "evaluation.json").rename(run / "later.json")  # trained, not yet evaluated
+    written = f"<!-- result:carracing_hebbian_seed1 -->{generate.PENDING}<!-- end result -->"
+    assert generate.render_results(written, page, tmp_path) == written
+    (run / "later.json").rename(run / "evaluation.json")  # evaluated since the page was written
+    behind = []
+    assert generate.render_results(written, page, tmp_path, behind) == written  # a check leaves it, and says so
+    assert behind == ["carracing_hebbian_seed1"]
+    assert generate.PENDING not in generate.render_results(written, page, tmp_path)  # a rewrite fills it in
 
 
 def test_a_record_of_counts_is_never_loaded(tmp_path, monkeypatch):
