@@ -337,7 +337,8 @@ def entry_folder(args: argparse.Namespace) -> Path:
 
 def status() -> int:
     """Each campaign run: generations done of the total, the training time metrics.csv records, the mean time
-    and environment steps of the last ten generations, and the last population mean and centre."""
+    and environment steps of the last ten generations, the last population mean and centre, and for a run not
+    yet complete the time its remaining generations would take at the last ten's pace."""
     from es import files
 
     for args in campaign_entries():
@@ -355,11 +356,14 @@ def status() -> int:
         if rows:
             last = rows[-10:]
             seconds = sum(float(row["seconds"]) for row in rows)
+            pace = sum(float(row["seconds"]) for row in last) / len(last)
             line += (f"; {seconds / 3600:.2f} h of training; the last {len(last)} generations "
-                     f"{sum(float(row['seconds']) for row in last) / len(last):.1f} s and "
+                     f"{pace:.1f} s and "
                      f"{sum(int(row['env_steps']) for row in last) / len(last):,.0f} env steps each; "
                      f"population mean {float(rows[-1]['fitness_mean']):.1f}, "
                      f"centre {float(rows[-1]['center_return']):.1f}")
+            if done < total:  # generations grow longer as a run learns: early on, this says too little
+                line += f"; at that pace about {(total - done) * pace / 3600:.1f} h more"
         say(line)
     return 0
 

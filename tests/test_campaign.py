@@ -274,3 +274,27 @@ def test_a_chunk_gives_its_session_the_campaigns_niceness():
     done = subprocess.run([sys.executable, "-c", script, str(ROOT)], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert done.stdout.split() == ["7"]
+
+
+def test_the_status_of_a_run_not_yet_complete_says_how_long_the_rest_takes(tmp_path, monkeypatch, capsys):
+    """A chunk stopped early: the status gives the time of the remaining generations at the last ten's pace."""
+    import experiments.paper as paper_script
+
+    entries = tmp_path / "campaign.toml"
+    entries.write_text('runs = ["carracing hebbian --seed 1 --popsize 4 --episodes 1 --generations 30"]\n')
+    monkeypatch.setattr(paper_script, "CAMPAIGN", entries)
+    monkeypatch.setattr(paper_script, "RESULTS", tmp_path / "results")
+    folder = tmp_path / "results" / "carracing_hebbian_seed1"
+    chunk = start(*SMALL, "--generations", "30", folder=folder)
+    wait_for_generations(folder, 2)
+    chunk.send_signal(signal.SIGINT)
+    output, _ = chunk.communicate(timeout=120)
+    assert chunk.returncode == 130, output[-2000:]
+    run = run_of(folder)
+    done = read_checkpoint(run / "checkpoint.npz").generation
+    with open(run / "metrics.csv", newline="") as handle:
+        seconds = [float(row["seconds"]) for row in csv.DictReader(handle)][:done][-10:]
+    assert paper_script.main(["campaign", "--status"]) == 0
+    (line,) = capsys.readouterr().out.strip().splitlines()
+    assert line.startswith(f"carracing hebbian seed 1: {run}: generation {done} of 30; ")
+    assert line.endswith(f"; at that pace about {(30 - done) * sum(seconds) / len(seconds) / 3600:.1f} h more")
