@@ -1,6 +1,7 @@
 """The campaign's committed runs (results/paper/<experiment>_<kind>_seed<N>/<run>/) are the paper's command made
 by this code: each run's recorded settings are its experiment file's with its seed, and training that command
-again gives the run's first generations row for row, every column of metrics.csv but the timings. This is
+again gives the run's first generations row for row, every column of metrics.csv but the timings; and the
+experiment files are the original README's command lines. This is
 the check a reader of the shipped results makes (experiments/README.md, "Checking the shipped runs"); it fails
 the day a change to the code moves the campaign's numbers.
 """
@@ -49,6 +50,28 @@ def rows_without_timings(path: Path, count: int) -> list[dict]:
 
 def run_id(run: Path) -> str:
     return run.parent.name
+
+
+# the original code's README commands for the paper's CarRacing runs (docs/original.md), as this tool takes them
+ORIGINAL = {
+    "carracing_hebbian": "train_hebb.py --environment CarRacing-v0 --hebb_rule ABCD_lr --generations 300 --popsize 200 "
+                         "--print_every 1 --init_weights uni --lr 0.2 --sigma 0.1 --decay 0.995 --threads -1 "
+                         "--distribution normal",
+    "carracing_static": "train_static.py --environment CarRacing-v0 --generations 300 --popsize 200 --print_every 1 "
+                        "--lr 0.2 --sigma 0.1 --decay 0.995 --threads -1",
+}
+
+
+@pytest.mark.parametrize("experiment", sorted(ORIGINAL))
+def test_the_experiment_files_are_the_original_commands(experiment):
+    """experiments/paper/carracing_*.toml give exactly the settings of the original README's command lines."""
+    kind = experiment.split("_")[1]
+    script, *words = ORIGINAL[experiment].split()
+    parser = importlib.import_module(Path(script).stem).build_parser()
+    same = ["--seed", "1", "--folder", "runs"]
+    original = config_from_args(kind, parser.parse_args([*words, *same]))
+    from_file = config_from_args(kind, parser.parse_args(["--config", f"experiments/paper/{experiment}.toml", *same]))
+    assert from_file.to_dict() == original.to_dict()  # every setting, the generations and workers included
 
 
 @pytest.mark.parametrize("run", RUNS, ids=run_id)
