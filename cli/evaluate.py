@@ -73,9 +73,9 @@ def evaluation_parser(prog: str, description: str, kind: str) -> Parser:
         help="also write the statistics (per environment: returns, mean, std, steps, seeds; for ants "
              "the distances and forward displacements walked) to this JSON file")
     add("--plot", default=None, metavar="PATH",
-        help=f"a figure ({', '.join(FIGURE_SUFFIXES)}) of one episode (first environment, first seed): reward per "
-             "step, or for ants the "
-             "distance walked, and for Hebbian networks the norm of each layer's weights over time")
+        help=f"a figure ({', '.join(FIGURE_SUFFIXES)}) of one episode (first environment, first seed): the return "
+             "so far, or for ants the distance walked, and for Hebbian networks the norm of each layer's weights over "
+             "time")
     parser.set_defaults(kind=kind)
     add_settings(parser, "evaluate", kind, evaluation_note=FROM_RUN)
     return parser

@@ -1,6 +1,6 @@
 """The paper's adaptation figure (Najarro & Risi 2020): one episode, step by step.
 
-Per step: the reward, or for ants the distance walked from the start; and for plastic networks the
+Per step: the return so far, or for ants the distance walked from the start; and for plastic networks the
 Frobenius norm of each dense layer's weights, which start random and settle within the first ~100
 steps. The data comes from ``envs.evaluation.trace_episode``; drawing uses matplotlib's Agg canvas,
 so no display is ever needed.
@@ -49,8 +49,8 @@ def plot_adaptation(trace: Trace, path: str | Path) -> None:
         axes[0].set_ylabel("torso from start (m)")
         axes[0].legend(loc="best")
     else:
-        axes[0].plot(steps, trace.rewards, color="tab:blue", linewidth=0.8)
-        axes[0].set_ylabel("reward per step")
+        axes[0].plot(steps, np.cumsum(trace.rewards), color="tab:blue")  # (CarRacing's per-step rewards: spikes)
+        axes[0].set_ylabel("return so far")
     axes[0].set_title(f"{trace.env_id}, seed {trace.seed}: return {trace.episode.total_return:.2f}, "
                       f"{steps_text(trace)}")
     if trace.layer_norms:
