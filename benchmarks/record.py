@@ -32,6 +32,11 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+if str(ROOT) not in sys.path:  # the project's modules, for a benchmark run as a script
+    sys.path.insert(0, str(ROOT))
+
+from report.machine import cpu_model  # noqa: E402
+
 RESULTS = ROOT / "benchmarks" / "results"
 # what sets the speed of every benchmark: the interpreter is added, and each script names its own extras
 VERSIONS = ("numpy", "numba", "torch", "gymnasium", "box2d", "pygame-ce", "mujoco", "pybullet",
@@ -62,16 +67,6 @@ class Measure:
 def add_results_flag(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--results", type=Path, default=RESULTS, metavar="FOLDER",
                         help="where the run's JSON record is written (default: benchmarks/results)")
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return " ".join(line.split(":", 1)[1].split())
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 def commit() -> str:

@@ -31,6 +31,7 @@ from es.runfolder import Checkpoint, RunFolder, RunFolderError, SaveError, relea
 from es.settings import ESSettings
 from report.log import FitnessPlot, GenerationLog
 from report.loggers import Loggers, missing
+from report.machine import machine
 from report.progress import display_for
 from settings import contradictions, type_problem, unmet_requirement
 
@@ -209,15 +210,18 @@ def versions() -> dict:
 
 def write_config(trainer: Trainer, config: TrainConfig, problem, command: list[str]) -> None:
     """config.json: the settings (with the noise size the run uses), then what they led to; a
-    resume keeps the first command and lists its own under "resumed"."""
+    resume keeps the first command and lists its own under "resumed", and each start and resume adds the
+    machine it runs on from its generation on under "machines" (what metrics.csv's seconds were measured on)."""
     folder = trainer.folder
     earlier = folder.read_config() if (folder.path / "config.json").exists() else {}
     line = " ".join(command)
     settings = replace(config, es=trainer.es)
     data = settings.to_dict()
+    here = {"from_generation": trainer.state.generation, **machine(trainer.evaluator.workers)}
     data.update(command=earlier.get("command", line), resumed=earlier.get("resumed", []) + ([line] if earlier else []),
                 versions=versions(), num_params=trainer.policy.num_params, layout=trainer.policy.layout.describe(),
-                workers=trainer.evaluator.workers, wrappers=problem.wrappers())
+                workers=trainer.evaluator.workers, wrappers=problem.wrappers(),
+                machines=earlier.get("machines", []) + [here])
     with explained("cannot start the loggers"):
         data["log"].update(trainer.begin(data))  # the loggers' settings once; their trackers' run ids, recorded
     folder.write_config(data)

@@ -46,6 +46,7 @@ import record as records  # noqa: E402  (benchmarks/record.py: what a record hol
 
 from es.files import read_json, read_metrics  # noqa: E402
 from es.runfolder import read_checkpoint  # noqa: E402
+from report.machine import machines_text  # noqa: E402
 
 MARKER = re.compile(r"(<!-- flags:(?P<script>\S+)(?: except (?P<other>\S+))? -->\n)(?P<table>.*?)(<!-- end flags -->)",
                     re.DOTALL)
@@ -216,7 +217,8 @@ def link(path: Path, page: Path) -> str:
 
 def result(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
     """One campaign run's evaluation: "**903 ± 45.1** (100 episodes on held-out seeds, generation 300 after 7.31 h
-    of training, weights)"; the hours are the sum of metrics.csv's ``seconds``."""
+    of training on AMD EPYC 7B13, 2 workers, weights)"; the hours are the sum of metrics.csv's ``seconds``, the
+    machines config.json's record."""
     run = evaluated(name, runs)
     if run is None:
         return PENDING
@@ -232,9 +234,10 @@ def result(name: str, environment: str | None, page: Path, runs: Path = RUNS) ->
     generation = read_checkpoint(run / "checkpoint.npz").generation
     hours = sum(float(row["seconds"]) for row in read_metrics(run / "metrics.csv")
                 if int(row["generation"]) <= generation) / 3600
+    machines = machines_text(read_json(run / "config.json").get("machines", []))
     return (f"**{number(entry['mean'])} ± {number(entry['std'])}** ([{entry['episodes']} episodes {seeds}]"
-            f"({link(run / 'evaluation.json', page)}), generation {generation} after {number(hours)} h of training, "
-            f"[weights]({link(run, page)}))")
+            f"({link(run / 'evaluation.json', page)}), generation {generation} after {number(hours)} h of training"
+            + (f" on {machines}" if machines else "") + f", [weights]({link(run, page)}))")
 
 
 def frames(name: str, page: Path, runs: Path = RUNS) -> str:

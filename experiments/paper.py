@@ -56,6 +56,7 @@ from cli.hints import EVALUATE_SCRIPTS, TRAIN_SCRIPTS  # noqa: E402
 from es.runfolder import named_file  # noqa: E402
 from experiments import campaign  # noqa: E402
 from policies import KINDS  # noqa: E402
+from report.machine import machines_text  # noqa: E402
 from report.stats import DEFAULT_REPS  # noqa: E402
 
 FILES = ROOT / "experiments" / "paper"
@@ -337,8 +338,9 @@ def entry_folder(args: argparse.Namespace) -> Path:
 
 def status() -> int:
     """Each campaign run: generations done of the total, the training time metrics.csv records, the mean time
-    and environment steps of the last ten generations, the last population mean and centre, and for a run not
-    yet complete the time its remaining generations would take at the last ten's pace."""
+    and environment steps of the last ten generations, the last population mean and centre, for a run not
+    yet complete the time its remaining generations would take at the last ten's pace, and the machines it ran
+    on (config.json's record)."""
     from es import files
 
     for args in campaign_entries():
@@ -348,7 +350,8 @@ def status() -> int:
             say(f"{name}: not started")
             continue
         rows = files.read_metrics(run_dir / "metrics.csv") if (run_dir / "metrics.csv").exists() else []
-        total = files.read_json(run_dir / "config.json")["run"]["generations"]
+        config = files.read_json(run_dir / "config.json")
+        total = config["run"]["generations"]
         done = generations_done(run_dir)
         rows = [row for row in rows if int(row["generation"]) <= done]
         evaluated = " (evaluated)" if (run_dir / "evaluation.json").exists() else ""
@@ -364,6 +367,8 @@ def status() -> int:
                      f"centre {float(rows[-1]['center_return']):.1f}")
             if done < total:  # generations grow longer as a run learns: early on, this says too little
                 line += f"; at that pace about {(total - done) * pace / 3600:.1f} h more"
+        if machines := machines_text(config.get("machines", [])):
+            line += f"; on {machines}"
         say(line)
     return 0
 

@@ -20,6 +20,7 @@ import pytest
 
 from es.runfolder import read_checkpoint
 from experiments.campaign import prune
+from report.machine import cpu_model
 
 ROOT = Path(__file__).resolve().parent.parent
 ENV = {**os.environ, "SDL_VIDEODRIVER": "dummy", "PYTHONUNBUFFERED": "1"}
@@ -297,4 +298,5 @@ def test_the_status_of_a_run_not_yet_complete_says_how_long_the_rest_takes(tmp_p
     assert paper_script.main(["campaign", "--status"]) == 0
     (line,) = capsys.readouterr().out.strip().splitlines()
     assert line.startswith(f"carracing hebbian seed 1: {run}: generation {done} of 30; ")
-    assert line.endswith(f"; at that pace about {(30 - done) * sum(seconds) / len(seconds) / 3600:.1f} h more")
+    assert line.endswith(f"; at that pace about {(30 - done) * sum(seconds) / len(seconds) / 3600:.1f} h more; "
+                         f"on {cpu_model()}, 2 workers")

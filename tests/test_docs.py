@@ -642,6 +642,8 @@ def evaluated_runs(tmp_path_factory) -> Path:
 
 
 def test_a_campaign_result_is_rendered_from_its_evaluation(evaluated_runs):
+    from report.machine import cpu_model
+
     page = ROOT / "experiments" / "README.md"
     (run,) = [path for path in (evaluated_runs / "carracing_hebbian_seed1").iterdir() if path.is_dir()]
     (entry,) = json.loads((run / "evaluation.json").read_text())["environments"]
@@ -656,7 +658,8 @@ def test_a_campaign_result_is_rendered_from_its_evaluation(evaluated_runs):
     rendered = generate.render_results(text, page, evaluated_runs)
     weights = os.path.relpath(run, page.parent)
     cell = (f"**{generate.number(mean)} ± {generate.number(std)}** ([2 episodes on held-out seeds]({evaluation}), "
-            f"generation 2 after {generate.number(hours)} h of training, [weights]({weights}))")
+            f"generation 2 after {generate.number(hours)} h of training on {cpu_model()}, 1 worker, "
+            f"[weights]({weights}))")
     assert rendered == (f"| <!-- result:carracing_hebbian_seed1 -->{cell}<!-- end result --> | "
                         f"<!-- result:carracing_hebbian_seed1 CarRacing-v3 -->{cell}<!-- end result --> |")
     assert generate.render_results(rendered, page, evaluated_runs) == rendered  # the check the pages pass

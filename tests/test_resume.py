@@ -17,6 +17,7 @@ import pytest
 import train_static
 from es import runfolder
 from es.runfolder import RunFolder
+from report.machine import cpu_model, machines_text
 from tests.run_helpers import (
     Training,
     assert_same_run,
@@ -47,6 +48,31 @@ def test_resumed_run_matches_an_uninterrupted_one(tmp_path, straight_run):
     split = only_run(tmp_path)
     assert train("--resume", str(split), "--generations", "4") == 0
     assert_same_run(straight_run, split)
+
+
+def test_each_start_and_resume_records_its_machine(tmp_path):
+    """config.json's "machines": the CPU, its cores and the workers of each start and resume, from the generation
+    it began at (what metrics.csv's seconds were measured on)."""
+    assert train(*CARTPOLE, "--threads", "1", "--generations", "2", "--folder", str(tmp_path)) == 0
+    run = only_run(tmp_path)
+    here = {"cpu": cpu_model(), "cores": os.cpu_count()}
+    assert RunFolder.existing(run).read_config()["machines"] == [{"from_generation": 0, **here, "workers": 1}]
+    assert train("--resume", str(run), "--generations", "3", "--threads", "2") == 0
+    assert RunFolder.existing(run).read_config()["machines"] == [{"from_generation": 0, **here, "workers": 1},
+                                                                  {"from_generation": 2, **here, "workers": 2}]
+    assert machines_text(RunFolder.existing(run).read_config()["machines"]) == (
+        f"{cpu_model()}, 1 worker; {cpu_model()}, 2 workers from generation 2")
+
+
+def test_the_machines_of_a_run_in_words():
+    def entry(start, cpu, workers):
+        return {"from_generation": start, "cpu": cpu, "cores": 16, "workers": workers}
+
+    # a machine that goes on from the entry before is said once; a record that begins late says where
+    assert machines_text([entry(0, "X", 2), entry(7, "X", 2), entry(9, "Y", 16)]) == "X, 2 workers; Y, 16 workers " \
+                                                                                      "from generation 9"
+    assert machines_text([entry(204, "X", 2)]) == "X, 2 workers from generation 204"
+    assert machines_text([]) == ""
 
 
 @pytest.fixture(scope="module")
