@@ -8,6 +8,7 @@
     python experiments/paper.py ant hebbian --popsize 8 --generations 2 --episodes 3   # a quick try
     python experiments/paper.py ant report            # static against Hebbian over every seed run so far
     python experiments/paper.py carracing hebbian --budget 120   # train for at most 2 hours, then stop, saved
+    python experiments/paper.py carracing hebbian --reproduce 3  # its first 3 generations again: the run's numbers?
 
 Each experiment is a data file, experiments/paper/<experiment>_<kind>.toml, that the training
 scripts read with --config (the same loader as a run's config.json); its [evaluation] section says
@@ -91,19 +92,26 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
                         help=f"with report: the folder holding the <experiment>_<kind>_seed<seed> folders (default: "
                              f"{RESULTS})")
     parser.add_argument("--reps", type=positive_int, default=DEFAULT_REPS, help="with report: bootstrap replications")
+    parser.add_argument("--reproduce", type=positive_int, default=None, metavar="N",
+                        help="train the experiment's command again for N generations, in a temporary folder, and "
+                             "compare them with its run's metrics.csv row by row (every column but the timings): "
+                             "does this machine and code give the run's numbers?")
     parser.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
     parser.add_argument("--status", action="store_true",
                         help="with campaign: how far each run got, and what its generations cost (from metrics.csv)")
     args = parser.parse_args(argv)
     if args.experiment == "campaign":
         others = [f"--{name.replace('_', '-')}" for name in ("kind", "seed", "popsize", "generations", "episodes",
-                                                             "folder", "dry_run")
+                                                             "folder", "dry_run", "reproduce")
                   if getattr(args, name) not in (None, False)]
         if (args.budget is None) == (not args.status) or others:
             parser.error("campaign takes --budget MINUTES (and --threads) or --status, and its runs from "
                          f"{shown(CAMPAIGN)}" + (f", not {' '.join(others)}" if others else ""))
     elif args.status:
         parser.error("--status goes with campaign: python experiments/paper.py campaign --status")
+    elif args.reproduce is not None and (args.kind not in TRAIN_SCRIPTS or args.budget is not None or args.dry_run):
+        parser.error("--reproduce N goes with an experiment and a kind (static or hebbian), without --budget and "
+                     "--dry-run: python experiments/paper.py carracing hebbian --reproduce 10")
     elif args.kind is None:
         parser.error(f"{args.experiment} needs a kind: static, hebbian or report")
     return args
@@ -232,8 +240,79 @@ def main(argv: list[str] | None = None) -> int:
         return report(args)
     if args.kind == "curves":
         return training_curves(args)
+    if args.reproduce is not None:
+        return reproduce(args)
     deadline = time.monotonic() + 60 * args.budget if args.budget is not None else None
     return experiment_main(args, deadline)
+
+
+TIMINGS = ("seconds", "total_seconds")  # the columns of metrics.csv that no two runs share
+
+
+def reproduce(args: argparse.Namespace) -> int:
+    """``--reproduce N``: the experiment's command trained again for N generations in a temporary folder, its
+    metrics.csv compared with the run's, row by row, every column but the timings. Exit 0 when every row is
+    the run's, 1 at the first that is not (named, with its columns), 2 when there is nothing to compare."""
+    import tempfile
+
+    from es import files
+
+    file = FILES / f"{args.experiment}_{args.kind}.toml"
+    with open(file, "rb") as handle:
+        seed = args.seed if args.seed is not None else tomllib.load(handle)["run"]["seed"]
+    name = f"{args.experiment}_{args.kind}_seed{seed}"
+    folder = Path(args.folder).resolve() if args.folder else ROOT / RESULTS / name
+    run_dir = latest_run(folder)
+    if run_dir is None:
+        print(f"paper.py: error: no run in {shown(folder)} to reproduce; train one first", file=sys.stderr)
+        return 2
+    recorded = files.read_metrics(run_dir / "metrics.csv")[:generations_done(run_dir)]
+    if len(recorded) < args.reproduce:
+        print(f"paper.py: error: {shown(run_dir)} has {len(recorded)} generations saved; give --reproduce "
+              f"{len(recorded)} or less", file=sys.stderr)
+        return 2
+    with tempfile.TemporaryDirectory(prefix="reproduce-") as scratch:
+        command = [sys.executable, str(ROOT / TRAIN_SCRIPTS[args.kind]), "--config", str(file), "--folder", scratch,
+                   *overrides(args, "seed", "popsize", "threads"), "--generations", str(args.reproduce)]
+        try:
+            check_training(args.kind, command)
+            differing = settings_against(args.kind, command, run_dir)
+        except (*USER_ERRORS, ValueError) as error:
+            print(f"paper.py: error: {error}", file=sys.stderr)
+            return 2
+        if differing:
+            print(f"paper.py: error: {shown(run_dir)} was made with other settings than "
+                  f"{shown(file)} and the flags given: {', '.join(differing)}", file=sys.stderr)
+            return 2
+        code = run(command, dry_run=False)
+        if code != 0:
+            return code
+        again = files.read_metrics(next(Path(scratch).glob("*/metrics.csv")))
+    for row, theirs in zip(again, recorded[:args.reproduce]):
+        columns = [f"{name} {row.get(name)} here, {value} in the run" for name, value in theirs.items()
+                   if name not in TIMINGS and row.get(name) != value]
+        if columns:
+            say(f"generation {theirs['generation']} differs from {shown(run_dir)}: {'; '.join(columns)}")
+            return 1
+    say(f"generations 1-{args.reproduce}: every column but the timings is {shown(run_dir)}'s")
+    return 0
+
+
+def settings_against(kind: str, command: list[str], run_dir: Path) -> list[str]:
+    """The settings the run recorded that the command does not ask for, '--name (the run has X, asked Y)'; the
+    folder, the workers and the number of generations aside, which change no number of the generations run."""
+    import importlib
+
+    from cli.config import TrainConfig
+    from cli.train import config_from_args
+    from es import files
+
+    script = importlib.import_module(Path(TRAIN_SCRIPTS[kind]).stem)
+    asked = config_from_args(kind, script.build_parser().parse_args(command[2:])).fixed()
+    recorded = TrainConfig.from_dict(files.read_json(run_dir / "config.json")).fixed()
+    aside = {"folder", "noise_size"}  # (noise_size: derived when the training starts)
+    return [f"--{name} (the run has {recorded.get(name)}, asked {asked.get(name)})"
+            for name in sorted({*recorded, *asked} - aside) if recorded.get(name) != asked.get(name)]
 
 
 def experiment_main(args: argparse.Namespace, deadline: float | None) -> int:

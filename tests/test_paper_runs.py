@@ -1,9 +1,9 @@
 """The campaign's committed runs (results/paper/<experiment>_<kind>_seed<N>/<run>/) are the paper's command made
 by this code: each run's recorded settings are its experiment file's with its seed, and training that command
-again gives the run's first generations row for row, every column of metrics.csv but the timings; and the
-experiment files are the original README's command lines. This is
-the check a reader of the shipped results makes (experiments/README.md, "Checking the shipped runs"); it fails
-the day a change to the code moves the campaign's numbers.
+again (``paper.py EXPERIMENT KIND --reproduce N``) gives the run's first generations row for row, every column
+of metrics.csv but the timings; and the experiment files are the original README's command lines. This is the
+check a reader of the shipped results makes (experiments/README.md, "Checking the shipped runs"); it fails the
+day a change to the code moves the campaign's numbers.
 """
 
 from __future__ import annotations
@@ -40,12 +40,6 @@ def paper_command(run: Path) -> list[str]:
     experiment, kind, seed = experiment_of(run)
     return [TRAIN_SCRIPTS[kind], "--config", f"experiments/paper/{experiment}_{kind}.toml", "--seed", str(seed),
             "--folder", str(run.parent.relative_to(ROOT))]
-
-
-def rows_without_timings(path: Path, count: int) -> list[dict]:
-    with open(path, newline="") as handle:
-        return [{key: value for key, value in row.items() if "seconds" not in key}
-                for row in csv.DictReader(handle)][:count]
 
 
 def run_id(run: Path) -> str:
@@ -86,11 +80,53 @@ def test_a_committed_run_has_the_papers_settings(run):
     assert differing == {}, f"{run}: settings that are not the paper's command (recorded, asked): {differing}"
 
 
+def paper(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "experiments/paper.py", *args], cwd=ROOT, capture_output=True, text=True,
+                          env={**os.environ, "SDL_VIDEODRIVER": "dummy"}, timeout=600)
+
+
 @pytest.mark.parametrize("run", RUNS, ids=run_id)
-def test_the_papers_command_gives_a_committed_runs_first_generations_again(run, tmp_path):
-    script, *words = paper_command(run)
-    words[words.index("--folder") + 1] = str(tmp_path)
-    subprocess.run([sys.executable, script, *words, "--generations", str(GENERATIONS), "--threads", "1"], cwd=ROOT,
-                   env={**os.environ, "SDL_VIDEODRIVER": "dummy"}, check=True, capture_output=True, timeout=600)
-    (again,) = tmp_path.glob("*/metrics.csv")
-    assert rows_without_timings(again, GENERATIONS) == rows_without_timings(run / "metrics.csv", GENERATIONS)
+def test_the_papers_command_gives_a_committed_runs_first_generations_again(run):
+    """``paper.py EXPERIMENT KIND --reproduce N``: the experiment's command trained again, compared row by row."""
+    experiment, kind, seed = experiment_of(run)
+    done = paper(experiment, kind, "--seed", str(seed), "--reproduce", str(GENERATIONS), "--threads", "1")
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    assert done.stdout.strip().splitlines()[-1] == (
+        f"generations 1-{GENERATIONS}: every column but the timings is {run.relative_to(ROOT)}'s")
+
+
+def test_reproduce_names_the_first_generation_that_differs(tmp_path):
+    """--reproduce on a small run of its own: identical; then with the run's metrics.csv as another machine
+    might have written it (generation 2's mean otherwise), exit 1 naming that generation and column; and the
+    refusals: more generations than the run saved, other settings than the run's, no run at all."""
+    small = ("carracing", "hebbian", "--popsize", "4", "--threads", "1", "--folder", str(tmp_path / "run"))
+    made = paper(*small, "--generations", "3", "--episodes", "1")
+    assert made.returncode == 0, made.stderr[-2000:]
+    same = paper(*small, "--reproduce", "3")
+    assert same.returncode == 0, same.stderr[-2000:]
+    (run,) = [path for path in (tmp_path / "run").iterdir() if path.is_dir()]
+    assert same.stdout.strip().splitlines()[-1] == f"generations 1-3: every column but the timings is {run}'s"
+    with open(run / "metrics.csv", newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    mean = rows[1]["fitness_mean"]
+    rows[1]["fitness_mean"] = "6.25"
+    with open(run / "metrics.csv", "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    other = paper(*small, "--reproduce", "3")
+    assert other.returncode == 1
+    assert other.stdout.strip().splitlines()[-1] == (
+        f"generation 2 differs from {run}: fitness_mean {mean} here, 6.25 in the run")
+    longer = paper(*small, "--reproduce", "4")
+    assert (longer.returncode, longer.stderr.strip()) == (
+        2, f"paper.py: error: {run} has 3 generations saved; give --reproduce 3 or less")
+    wider = paper(*small[:2], "--popsize", "6", *small[4:], "--reproduce", "2")
+    assert wider.returncode == 2 and wider.stderr.strip().endswith("--popsize (the run has 4, asked 6)"), wider.stderr
+    nothing = paper(*small[:-1], str(tmp_path / "none"), "--reproduce", "2")
+    assert (nothing.returncode, nothing.stderr.strip()) == (
+        2, f"paper.py: error: no run in {tmp_path / 'none'} to reproduce; train one first")
+    for words in (("campaign", "--reproduce", "2"), ("carracing", "report", "--reproduce", "2"),
+                  ("carracing", "hebbian", "--reproduce", "2", "--budget", "5")):
+        refused = paper(*words)
+        assert refused.returncode == 2 and len(refused.stderr.strip().splitlines()) <= 2, refused.stderr
