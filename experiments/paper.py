@@ -109,9 +109,11 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
                          f"{shown(CAMPAIGN)}" + (f", not {' '.join(others)}" if others else ""))
     elif args.status:
         parser.error("--status goes with campaign: python experiments/paper.py campaign --status")
-    elif args.reproduce is not None and (args.kind not in TRAIN_SCRIPTS or args.budget is not None or args.dry_run):
-        parser.error("--reproduce N goes with an experiment and a kind (static or hebbian), without --budget and "
-                     "--dry-run: python experiments/paper.py carracing hebbian --reproduce 10")
+    elif args.reproduce is not None and (args.kind not in TRAIN_SCRIPTS or args.budget is not None or args.dry_run
+                                         or args.generations is not None or args.episodes is not None):
+        parser.error("--reproduce N goes with an experiment and a kind (static or hebbian), without --budget, "
+                     "--dry-run, --generations and --episodes: python experiments/paper.py carracing hebbian "
+                     "--reproduce 10")
     elif args.kind is None:
         parser.error(f"{args.experiment} needs a kind: static, hebbian or report")
     return args
@@ -268,8 +270,9 @@ def reproduce(args: argparse.Namespace) -> int:
         return 2
     recorded = files.read_metrics(run_dir / "metrics.csv")[:generations_done(run_dir)]
     if len(recorded) < args.reproduce:
-        print(f"paper.py: error: {shown(run_dir)} has {len(recorded)} generations saved; give --reproduce "
-              f"{len(recorded)} or less", file=sys.stderr)
+        saved = (f"{len(recorded)} generations saved; give --reproduce {len(recorded)} or less" if recorded else
+                 "no generation saved yet")
+        print(f"paper.py: error: {shown(run_dir)} has {saved}", file=sys.stderr)
         return 2
     with tempfile.TemporaryDirectory(prefix="reproduce-") as scratch:
         command = [sys.executable, str(ROOT / TRAIN_SCRIPTS[args.kind]), "--config", str(file), "--folder", scratch,
@@ -289,8 +292,8 @@ def reproduce(args: argparse.Namespace) -> int:
             return code
         again = files.read_metrics(next(Path(scratch).glob("*/metrics.csv")))
     for row, theirs in zip(again, recorded[:args.reproduce]):
-        columns = [f"{name} {row.get(name)} here, {value} in the run" for name, value in theirs.items()
-                   if name not in TIMINGS and row.get(name) != value]
+        columns = [f"{column} {row.get(column)} here, {value} in the run" for column, value in theirs.items()
+                   if column not in TIMINGS and row.get(column) != value]
         if columns:
             say(f"generation {theirs['generation']} differs from {shown(run_dir)}: {'; '.join(columns)}")
             return 1

@@ -131,6 +131,7 @@ def test_reproduce_names_the_first_generation_that_differs(tmp_path):
     assert (nothing.returncode, nothing.stderr.strip()) == (
         2, f"paper.py: error: no run in {tmp_path / 'none'} to reproduce; train one first")
     for words in (("campaign", "--reproduce", "2"), ("carracing", "report", "--reproduce", "2"),
-                  ("carracing", "hebbian", "--reproduce", "2", "--budget", "5")):
+                  ("carracing", "hebbian", "--reproduce", "2", "--budget", "5"),
+                  ("carracing", "hebbian", "--reproduce", "2", "--generations", "5")):
         refused = paper(*words)
         assert refused.returncode == 2 and len(refused.stderr.strip().splitlines()) <= 2, refused.stderr
