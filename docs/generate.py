@@ -44,8 +44,10 @@ for folder in (ROOT, ROOT / "benchmarks"):
 
 import record as records  # noqa: E402  (benchmarks/record.py: what a record holds)
 
+from cli.errors import USER_ERRORS  # noqa: E402
 from es.files import read_json, read_metrics  # noqa: E402
 from es.runfolder import read_checkpoint  # noqa: E402
+from experiments.paper import HELD_OUT_SEED, latest_run  # noqa: E402
 from report.machine import machines_text  # noqa: E402
 
 MARKER = re.compile(r"(<!-- flags:(?P<script>\S+)(?: except (?P<other>\S+))? -->\n)(?P<table>.*?)(<!-- end flags -->)",
@@ -202,13 +204,12 @@ RESULT = re.compile(r"(?<!`)(<!-- result:(?P<run>[\w.-]+)(?: (?P<environment>[\w
 FRAMES = re.compile(r"(?<!`)(<!-- frames:(?P<run>[\w.-]+) -->)(?P<text>.*?)(?P<end><!-- end frames -->)")
 PENDING = "not yet: training in the campaign"
 FRAMES_PENDING = "(the agent's frames, once its run is evaluated)"
-HELD_OUT = 2**31  # the first episode seed no training uses (experiments/paper.py)
 
 
 def evaluated(name: str, runs: Path) -> Path | None:
-    """The newest run folder of ``runs/name`` (as experiments/paper.py picks it), if it has been evaluated."""
-    found = sorted(path.parent for path in (runs / name).glob("*/checkpoint.npz"))
-    return found[-1] if found and (found[-1] / "evaluation.json").is_file() else None
+    """The newest run folder of ``runs/name`` (the one experiments/paper.py continues), if it has been evaluated."""
+    run = latest_run(runs / name)
+    return run if run is not None and (run / "evaluation.json").is_file() else None
 
 
 def link(path: Path, page: Path) -> str:
@@ -222,22 +223,28 @@ def result(name: str, environment: str | None, page: Path, runs: Path = RUNS) ->
     run = evaluated(name, runs)
     if run is None:
         return PENDING
-    evaluation = read_json(run / "evaluation.json")
-    entries = evaluation["environments"]
-    chosen = [entry for entry in entries if environment in (None, entry["environment"])]
-    if len(chosen) != 1:
-        found = ", ".join(entry["environment"] for entry in entries)
-        raise FigureError(f"{name}: {'no' if not chosen else 'several'} environment{'' if environment else 's'} "
-                          f"{environment or ''} in {run / 'evaluation.json'} ({found}); name one in the marker")
-    (entry,) = chosen
-    seeds = "on held-out seeds" if evaluation["seed"] >= HELD_OUT else f"from seed {evaluation['seed']}"
-    generation = read_checkpoint(run / "checkpoint.npz").generation
-    hours = sum(float(row["seconds"]) for row in read_metrics(run / "metrics.csv")
-                if int(row["generation"]) <= generation) / 3600
-    machines = machines_text(read_json(run / "config.json").get("machines", []))
-    return (f"**{number(entry['mean'])} ± {number(entry['std'])}** ([{entry['episodes']} episodes {seeds}]"
-            f"({link(run / 'evaluation.json', page)}), generation {generation} after {number(hours)} h of training"
-            + (f" on {machines}" if machines else "") + f", [weights]({link(run, page)}))")
+    try:
+        evaluation = read_json(run / "evaluation.json")
+        entries = evaluation["environments"]
+        chosen = [entry for entry in entries if environment in (None, entry["environment"])]
+        if len(chosen) != 1:
+            found = ", ".join(entry["environment"] for entry in entries)
+            raise FigureError(f"{name}: {'no' if not chosen else 'several'} environment{'' if environment else 's'} "
+                              f"{environment or ''} in {run / 'evaluation.json'} ({found}); name one in the marker")
+        (entry,) = chosen
+        seeds = "on held-out seeds" if evaluation["seed"] >= HELD_OUT_SEED else f"from seed {evaluation['seed']}"
+        generation = read_checkpoint(run / "checkpoint.npz").generation
+        hours = sum(float(row["seconds"]) for row in read_metrics(run / "metrics.csv")
+                    if int(row["generation"]) <= generation) / 3600
+        machines = machines_text(read_json(run / "config.json").get("machines", []))
+        mean, std, episodes = number(entry["mean"]), number(entry["std"]), entry["episodes"]
+    except (KeyError, TypeError, ValueError, OSError, *USER_ERRORS) as error:
+        if isinstance(error, FigureError):
+            raise
+        raise FigureError(f"{name}: {run} is not a run this tool evaluated ({type(error).__name__}: {error})") from None
+    return (f"**{mean} ± {std}** ([{episodes} episodes {seeds}]({link(run / 'evaluation.json', page)}), generation "
+            f"{generation} after {number(hours)} h of training" + (f" on {machines}" if machines else "")
+            + f", [weights]({link(run, page)}))")
 
 
 def frames(name: str, page: Path, runs: Path = RUNS) -> str:

@@ -124,6 +124,21 @@ def shown(path: Path) -> Path:
     return path.relative_to(ROOT) if path.is_relative_to(ROOT) else path
 
 
+def load_experiment(args: argparse.Namespace) -> tuple[Path, dict]:
+    """The experiment file of ``args`` (experiments/paper/<experiment>_<kind>.toml) and its content."""
+    file = FILES / f"{args.experiment}_{args.kind}.toml"
+    with open(file, "rb") as handle:
+        return file, tomllib.load(handle)
+
+
+def experiment_folder(args: argparse.Namespace, experiment: dict) -> Path:
+    """Where the experiment's runs go: by default results/paper/<experiment>_<kind>_seed<seed>, relative to the
+    repository's root, where the training runs (config.json stays portable); a --folder given, resolved from
+    where this command runs. ``ROOT / folder`` is the folder in both cases."""
+    seed = args.seed if args.seed is not None else experiment["run"]["seed"]
+    return Path(args.folder).resolve() if args.folder else RESULTS / f"{args.experiment}_{args.kind}_seed{seed}"
+
+
 def latest_run(folder: Path) -> Path | None:
     runs = sorted(path.parent for path in folder.glob("*/checkpoint.npz"))  # names start with the time
     return runs[-1] if runs else None
@@ -145,9 +160,11 @@ def train_command(args: argparse.Namespace, file: Path, folder: Path) -> list[st
                       *overrides(args, "seed", "popsize", "generations", "threads")]
 
 
-def check_training(kind: str, command: list[str]) -> None:
+def check_training(kind: str, command: list[str]):
     """Check the training command as its script will (flags, experiment file, a resumed run's settings),
-    without running it: a UserError names the first problem; argparse's own errors exit with code 2."""
+    without running it, and return the settings it would train with (a ``TrainConfig``): a UserError names the
+    first problem; argparse's own errors exit with code 2. ``kind`` is one of ``TRAIN_SCRIPTS`` (the parser's
+    choices), whose script is imported for its parser."""
     import importlib
 
     from cli.train import checked_resume, config_from_args
@@ -155,12 +172,12 @@ def check_training(kind: str, command: list[str]) -> None:
 
     script = importlib.import_module(Path(TRAIN_SCRIPTS[kind]).stem)
     args = script.build_parser().parse_args(command[2:])
-    if args.resume is None:
-        run = config_from_args(kind, args).run
-        if run.backend == "process" and not run.in_process:
-            check_workers(run.workers)
-        return
-    checked_resume(kind, args)
+    if args.resume is not None:
+        return checked_resume(kind, args)[0]
+    config = config_from_args(kind, args)
+    if config.run.backend == "process" and not config.run.in_process:
+        check_workers(config.run.workers)
+    return config
 
 
 def evaluate_command(args: argparse.Namespace, experiment: dict, run_dir: Path) -> list[str]:
@@ -257,30 +274,32 @@ def reproduce(args: argparse.Namespace) -> int:
     the run's, 1 at the first that is not (named, with its columns), 2 when there is nothing to compare."""
     import tempfile
 
+    from cli.config import TrainConfig, declared
     from es import files
+    from settings import contradictions
 
-    file = FILES / f"{args.experiment}_{args.kind}.toml"
-    with open(file, "rb") as handle:
-        seed = args.seed if args.seed is not None else tomllib.load(handle)["run"]["seed"]
-    name = f"{args.experiment}_{args.kind}_seed{seed}"
-    folder = Path(args.folder).resolve() if args.folder else ROOT / RESULTS / name
-    run_dir = latest_run(folder)
+    file, experiment = load_experiment(args)
+    run_dir = latest_run(ROOT / experiment_folder(args, experiment))
     if run_dir is None:
-        print(f"paper.py: error: no run in {shown(folder)} to reproduce; train one first", file=sys.stderr)
-        return 2
-    recorded = files.read_metrics(run_dir / "metrics.csv")[:generations_done(run_dir)]
-    if len(recorded) < args.reproduce:
-        saved = (f"{len(recorded)} generations saved; give --reproduce {len(recorded)} or less" if recorded else
-                 "no generation saved yet")
-        print(f"paper.py: error: {shown(run_dir)} has {saved}", file=sys.stderr)
+        print(f"paper.py: error: no run in {shown(ROOT / experiment_folder(args, experiment))} to reproduce; train "
+              "one first", file=sys.stderr)
         return 2
     with tempfile.TemporaryDirectory(prefix="reproduce-") as scratch:
         command = [sys.executable, str(ROOT / TRAIN_SCRIPTS[args.kind]), "--config", str(file), "--folder", scratch,
                    *overrides(args, "seed", "popsize", "threads"), "--generations", str(args.reproduce)]
         try:
-            check_training(args.kind, command)
-            differing = settings_against(args.kind, command, run_dir)
-        except (*USER_ERRORS, ValueError) as error:
+            recorded = files.read_metrics(run_dir / "metrics.csv")[:generations_done(run_dir)]
+            if len(recorded) < args.reproduce:
+                raise ValueError(f"{shown(run_dir)} has " + (
+                    f"{len(recorded)} generations saved; give --reproduce {len(recorded)} or less" if recorded
+                    else "no generation saved yet"))
+            # the fixed settings (not the workers nor the generations, which change no number of those run), but
+            # the folder and the noise table's size, derived when the training starts
+            asked = {name: value for name, value in check_training(args.kind, command).fixed().items()
+                     if name not in ("folder", "noise_size")}
+            differing = contradictions(TrainConfig.from_dict(files.read_json(run_dir / "config.json")).fixed(), asked,
+                                       declared())
+        except (*USER_ERRORS, OSError, ValueError, TypeError) as error:
             print(f"paper.py: error: {error}", file=sys.stderr)
             return 2
         if differing:
@@ -301,32 +320,10 @@ def reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
-def settings_against(kind: str, command: list[str], run_dir: Path) -> list[str]:
-    """The settings the run recorded that the command does not ask for, '--name (the run has X, asked Y)'; the
-    folder, the workers and the number of generations aside, which change no number of the generations run."""
-    import importlib
-
-    from cli.config import TrainConfig
-    from cli.train import config_from_args
-    from es import files
-
-    script = importlib.import_module(Path(TRAIN_SCRIPTS[kind]).stem)
-    asked = config_from_args(kind, script.build_parser().parse_args(command[2:])).fixed()
-    recorded = TrainConfig.from_dict(files.read_json(run_dir / "config.json")).fixed()
-    aside = {"folder", "noise_size"}  # (noise_size: derived when the training starts)
-    return [f"--{name} (the run has {recorded.get(name)}, asked {asked.get(name)})"
-            for name in sorted({*recorded, *asked} - aside) if recorded.get(name) != asked.get(name)]
-
-
 def experiment_main(args: argparse.Namespace, deadline: float | None) -> int:
     """One experiment: training and evaluation, or with a ``deadline`` one chunk of the campaign."""
-    file = FILES / f"{args.experiment}_{args.kind}.toml"
-    with open(file, "rb") as handle:
-        experiment = tomllib.load(handle)
-    seed = args.seed if args.seed is not None else experiment["run"]["seed"]
-    # the child runs in the repository's root: the default folder relative to it (config.json stays
-    # portable), a folder given relative to where this command runs
-    folder = Path(args.folder).resolve() if args.folder else RESULTS / f"{args.experiment}_{args.kind}_seed{seed}"
+    file, experiment = load_experiment(args)
+    folder = experiment_folder(args, experiment)
     command = train_command(args, file, folder)
     try:
         check_training(args.kind, command)
@@ -415,7 +412,7 @@ def campaign_entries(threads: int | None = None) -> list[argparse.Namespace]:
 
 
 def entry_folder(args: argparse.Namespace) -> Path:
-    return ROOT / RESULTS / f"{args.experiment}_{args.kind}_seed{args.seed if args.seed is not None else 1}"
+    return ROOT / experiment_folder(args, load_experiment(args)[1])
 
 
 def status() -> int:
