@@ -45,10 +45,9 @@ for folder in (ROOT, ROOT / "benchmarks"):
 import record as records  # noqa: E402  (benchmarks/record.py: what a record holds)
 
 from cli.errors import USER_ERRORS  # noqa: E402
-from es.files import read_json, read_metrics  # noqa: E402
-from es.runfolder import read_checkpoint  # noqa: E402
+from es.files import read_json  # noqa: E402
+from experiments import campaign  # noqa: E402
 from experiments.paper import HELD_OUT_SEED, latest_run  # noqa: E402
-from report.machine import machines_text  # noqa: E402
 
 MARKER = re.compile(r"(<!-- flags:(?P<script>\S+)(?: except (?P<other>\S+))? -->\n)(?P<table>.*?)(<!-- end flags -->)",
                     re.DOTALL)
@@ -233,10 +232,8 @@ def result(name: str, environment: str | None, page: Path, runs: Path = RUNS) ->
                               f"{environment or ''} in {run / 'evaluation.json'} ({found}); name one in the marker")
         (entry,) = chosen
         seeds = "on held-out seeds" if evaluation["seed"] >= HELD_OUT_SEED else f"from seed {evaluation['seed']}"
-        generation = read_checkpoint(run / "checkpoint.npz").generation
-        hours = sum(float(row["seconds"]) for row in read_metrics(run / "metrics.csv")
-                    if int(row["generation"]) <= generation) / 3600
-        machines = machines_text(read_json(run / "config.json").get("machines", []))
+        progress = campaign.measure(run)
+        generation, hours, machines = progress.done, progress.hours, progress.machines
         mean, std, episodes = number(entry["mean"]), number(entry["std"]), entry["episodes"]
     except (KeyError, TypeError, ValueError, OSError, *USER_ERRORS) as error:
         if isinstance(error, FigureError):

@@ -27,10 +27,13 @@ import os
 import signal
 import subprocess
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 PID_FILE = "campaign.pid"  # beside the experiments' folders: results/paper/campaign.pid
 STOPPED = (130, -signal.SIGINT)  # a child that stopped at a SIGINT, its last saved generation intact
+PROGRESS = "progress.md"  # beside them too: how far each run of the campaign got, written at every chunk's end
+PACE = 10  # the generations whose mean duration projects the rest of a run
 GRACE = 30.0  # seconds a generation may take to finish after the first SIGINT, before a stop at once
 POLL = 0.5  # seconds between looks at the child and at metrics.csv
 SAFETY = 1.15  # a generation may take this much longer than the last one did
@@ -187,3 +190,52 @@ def prune(run_dir: Path, complete: bool) -> list[str]:
             path.unlink()
             removed.append(path.name)
     return removed
+
+
+@dataclass(frozen=True)
+class Progress:
+    """How far a run got, from its own files: the generation its checkpoint holds of the total its config.json
+    asks for, whether it was evaluated, and what its generations cost (metrics.csv's ``seconds`` and
+    ``env_steps``, up to that generation)."""
+
+    done: int
+    total: int
+    evaluated: bool
+    hours: float  # the training so far: the generations' seconds, summed
+    paced: int  # the last generations, PACE at most, whose mean seconds and environment steps follow
+    pace: float | None
+    steps: float | None
+    mean: float | None  # the last generation's population mean fitness and centre return
+    centre: float | None
+    machines: str  # config.json's record of the machines (report.machine.machines_text)
+
+    @property
+    def complete(self) -> bool:
+        return self.done >= self.total
+
+    @property
+    def hours_left(self) -> float | None:
+        """The remaining generations at the last ones' pace. Generations grow longer as a run learns to stay in
+        its episodes, so early on this says too little."""
+        return None if self.complete or self.pace is None else (self.total - self.done) * self.pace / 3600
+
+
+def measure(run_dir: Path) -> Progress:
+    """The ``Progress`` of the run in ``run_dir``."""
+    from es import files
+    from es.runfolder import read_checkpoint
+    from report.machine import machines_text
+
+    config = files.read_json(run_dir / "config.json")
+    done = read_checkpoint(run_dir / "checkpoint.npz").generation
+    rows = files.read_metrics(run_dir / "metrics.csv") if (run_dir / "metrics.csv").exists() else []
+    rows = [row for row in rows if int(row["generation"]) <= done]  # a generation recorded but not saved: not done
+    last = rows[-PACE:]
+    return Progress(
+        done=done, total=config["run"]["generations"], evaluated=(run_dir / "evaluation.json").exists(),
+        hours=sum(float(row["seconds"]) for row in rows) / 3600, paced=len(last),
+        pace=sum(float(row["seconds"]) for row in last) / len(last) if last else None,
+        steps=sum(int(row["env_steps"]) for row in last) / len(last) if last else None,
+        mean=float(rows[-1]["fitness_mean"]) if rows else None,
+        centre=float(rows[-1]["center_return"]) if rows else None,
+        machines=machines_text(config.get("machines", [])))

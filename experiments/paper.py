@@ -57,7 +57,6 @@ from cli.hints import EVALUATE_SCRIPTS, TRAIN_SCRIPTS  # noqa: E402
 from es.runfolder import named_file  # noqa: E402
 from experiments import campaign  # noqa: E402
 from policies import KINDS  # noqa: E402
-from report.machine import machines_text  # noqa: E402
 from report.stats import DEFAULT_REPS  # noqa: E402
 
 FILES = ROOT / "experiments" / "paper"
@@ -202,20 +201,41 @@ def run(command: list[str], dry_run: bool) -> int:
 
 
 
-def training_curves(args: argparse.Namespace) -> int:
-    """Every seed's newest run of both kinds, each as population mean, centre and best so far, in one figure."""
+def curves_figure(runs: Path, experiment: str) -> tuple[Path, list[str]] | None:
+    """Every seed's newest run of both kinds in ``runs``, each as population mean, centre and best so far, in
+    one figure, ``runs/<experiment>_curves.png``, the x axis to the runs' total generations: a run not yet
+    complete is labelled partial, with how far it got. Returns the file and the labels; None for no run."""
     from es import files
     from report import plots
 
-    runs = [(f"{kind} seed {folder.name.rsplit('seed', 1)[1]}", files.read_metrics(run / "metrics.csv"))
-            for kind in TRAIN_SCRIPTS for folder in sorted(args.runs.glob(f"{args.experiment}_{kind}_seed*"))
-            if (run := latest_run(folder)) is not None and (run / "metrics.csv").exists()]
-    if not runs:
+    curves, total = [], 0
+    for kind in TRAIN_SCRIPTS:
+        for folder in sorted(runs.glob(f"{experiment}_{kind}_seed*")):
+            run = latest_run(folder)
+            if run is None or not (run / "metrics.csv").exists():
+                continue
+            progress = campaign.measure(run)
+            label = f"{kind} seed {folder.name.rsplit('seed', 1)[1]}"
+            if not progress.complete:
+                label += f", partial: generation {progress.done} of {progress.total}"
+            rows = [row for row in files.read_metrics(run / "metrics.csv") if int(row["generation"]) <= progress.done]
+            curves.append((label, rows))
+            total = max(total, progress.total)
+    if not curves:
+        return None
+    out = runs / f"{experiment}_curves.png"
+    plots.save_comparison(out, curves, generations=total)
+    return out, [label for label, _ in curves]
+
+
+def training_curves(args: argparse.Namespace) -> int:
+    """``EXPERIMENT curves``: ``curves_figure`` of the runs in --runs."""
+    written = curves_figure(args.runs, args.experiment)
+    if written is None:
         print(f"paper.py: error: no {args.experiment} run in {args.runs}; train one first", file=sys.stderr)
         return 2
-    out = args.runs / f"{args.experiment}_curves.png"
-    plots.save_comparison(out, runs)
-    say(f"wrote {shown(out)} ({', '.join(label for label, _ in runs)})")
+    out, labels = written
+    say(f"wrote {shown(out)} ({'; '.join(labels)})")
     return 0
 
 
@@ -382,10 +402,11 @@ def run_campaign(args: argparse.Namespace, experiment: dict, command: list[str],
                 interrupted = interrupted or chunk.signals > 0
                 if code != 0 and code not in campaign.STOPPED:
                     return code if code > 0 else 1
+            campaign.prune(run_dir, complete=done >= total)
+            write_pages(folder.parent, args.experiment)  # before the pid file goes: a stop hook commits them
     except campaign.CampaignError as error:
         print(f"paper.py: error: {error}", file=sys.stderr)
         return 2
-    campaign.prune(run_dir, complete=done >= total)
     evaluated = (run_dir / "evaluation.json").exists()
     state = "complete and evaluated" if evaluated else "complete, not yet evaluated" if done >= total else "saved"
     say(f"campaign: {shown(run_dir)}: generation {done} "
@@ -394,6 +415,21 @@ def run_campaign(args: argparse.Namespace, experiment: dict, command: list[str],
         say(f"continue with: python experiments/paper.py {continue_words(args)} --budget MINUTES "
             "(or the whole campaign: python experiments/paper.py campaign --budget MINUTES)")
     return 130 if interrupted else 0
+
+
+def write_pages(runs: Path, experiment: str) -> None:
+    """At a chunk's end, beside the runs: ``progress.md`` (``progress_page``) and the experiment's curves
+    (``curves_figure``), so that what a session commits says how far the campaign got. A file that cannot be
+    written is named; the chunk's run stays as it was saved."""
+    from es import files
+
+    try:
+        files.atomic_write_text(runs / campaign.PROGRESS, progress_page(runs))
+        written = curves_figure(runs, experiment)
+    except (OSError, ValueError) as error:
+        say(f"campaign: the progress page or the curves in {shown(runs)} could not be written: {error}")
+        return
+    say(f"campaign: wrote {shown(runs / campaign.PROGRESS)}" + (f" and {shown(written[0])}" if written else ""))
 
 
 def continue_words(args: argparse.Namespace) -> str:
@@ -415,41 +451,68 @@ def entry_folder(args: argparse.Namespace) -> Path:
     return ROOT / experiment_folder(args, load_experiment(args)[1])
 
 
+def campaign_runs(runs: Path) -> list[tuple[str, Path]]:
+    """The campaign's runs, in its order, each as its name ("carracing hebbian seed 1") and its experiment's
+    folder in ``runs``."""
+    named = []
+    for args in campaign_entries():
+        seed = args.seed if args.seed is not None else load_experiment(args)[1]["run"]["seed"]
+        named.append((f"{args.experiment} {args.kind} seed {seed}", runs / f"{args.experiment}_{args.kind}_seed{seed}"))
+    return named
+
+
 def status() -> int:
     """Each campaign run: generations done of the total, the training time metrics.csv records, the mean time
     and environment steps of the last ten generations, the last population mean and centre, for a run not
     yet complete the time its remaining generations would take at the last ten's pace, and the machines it ran
     on (config.json's record)."""
-    from es import files
-
-    for args in campaign_entries():
-        name = f"{args.experiment} {args.kind} seed {args.seed if args.seed is not None else 1}"
-        run_dir = latest_run(entry_folder(args))
+    for name, folder in campaign_runs(ROOT / RESULTS):
+        run_dir = latest_run(folder)
         if run_dir is None:
             say(f"{name}: not started")
             continue
-        rows = files.read_metrics(run_dir / "metrics.csv") if (run_dir / "metrics.csv").exists() else []
-        config = files.read_json(run_dir / "config.json")
-        total = config["run"]["generations"]
-        done = generations_done(run_dir)
-        rows = [row for row in rows if int(row["generation"]) <= done]
-        evaluated = " (evaluated)" if (run_dir / "evaluation.json").exists() else ""
-        line = f"{name}: {shown(run_dir)}: generation {done} of {total}{evaluated}"
-        if rows:
-            last = rows[-10:]
-            seconds = sum(float(row["seconds"]) for row in rows)
-            pace = sum(float(row["seconds"]) for row in last) / len(last)
-            line += (f"; {seconds / 3600:.2f} h of training; the last {len(last)} generations "
-                     f"{pace:.1f} s and "
-                     f"{sum(int(row['env_steps']) for row in last) / len(last):,.0f} env steps each; "
-                     f"population mean {float(rows[-1]['fitness_mean']):.1f}, "
-                     f"centre {float(rows[-1]['center_return']):.1f}")
-            if done < total:  # generations grow longer as a run learns: early on, this says too little
-                line += f"; at that pace about {(total - done) * pace / 3600:.1f} h more"
-        if machines := machines_text(config.get("machines", [])):
-            line += f"; on {machines}"
+        progress = campaign.measure(run_dir)
+        line = (f"{name}: {shown(run_dir)}: generation {progress.done} of {progress.total}"
+                + (" (evaluated)" if progress.evaluated else ""))
+        if progress.pace is not None:
+            line += (f"; {progress.hours:.2f} h of training; the last {progress.paced} generations "
+                     f"{progress.pace:.1f} s and {progress.steps:,.0f} env steps each; "
+                     f"population mean {progress.mean:.1f}, centre {progress.centre:.1f}")
+            if not progress.complete:
+                line += f"; at that pace about {progress.hours_left:.1f} h more"
+        if progress.machines:
+            line += f"; on {progress.machines}"
         say(line)
     return 0
+
+
+def progress_page(runs: Path) -> str:
+    """The campaign's runs in ``runs`` as a Markdown table (``runs/progress.md``, written at every chunk's end)."""
+    lines = ["# The campaign's runs", "",
+             "How far each run of `experiments/paper/campaign.toml` got, written by `experiments/paper.py` at the "
+             "end of every chunk from the run's own files: the generation its `checkpoint.npz` holds, the "
+             f"`seconds` and `env_steps` of its `metrics.csv` (the mean of the last {campaign.PACE} generations is "
+             "the pace), the machines its `config.json` records. A run not yet complete is **partial**: its "
+             "figures are those of the generations done so far, and its remaining time is the last generations' "
+             "pace times the generations left (generations grow longer as a run learns to stay in its episodes).", "",
+             "| run | generation | training so far | last generations, each | remaining, at that pace "
+             "| population mean, centre | machines |",
+             "|---|---|---|---|---|---|---|"]
+    for name, folder in campaign_runs(runs):
+        run_dir = latest_run(folder)
+        if run_dir is None:
+            lines.append(f"| {name} | not started | | | | | |")
+            continue
+        progress = campaign.measure(run_dir)
+        state = ("complete, evaluated" if progress.evaluated else "complete, not yet evaluated" if progress.complete
+                 else "**partial**")
+        cost = (f"{progress.pace:.1f} s, {progress.steps:,.0f} env steps" if progress.pace is not None else "")
+        left = ("" if progress.hours_left is None
+                else f"about {progress.hours_left:.1f} h ({progress.hours + progress.hours_left:.1f} h in all)")
+        fitness = f"{progress.mean:.1f}, {progress.centre:.1f}" if progress.mean is not None else ""
+        lines.append(f"| [{name}]({run_dir.relative_to(runs).as_posix()}) | {progress.done} of {progress.total}, "
+                     f"{state} | {progress.hours:.2f} h | {cost} | {left} | {fitness} | {progress.machines} |")
+    return "\n".join(lines) + "\n"
 
 
 def run_queue(args: argparse.Namespace) -> int:

@@ -76,10 +76,13 @@ def run_figure(rows: Sequence[dict], title: str):
     return figure
 
 
-def comparison_figure(runs: Sequence[tuple[str, Sequence[dict]]]):
+def comparison_figure(runs: Sequence[tuple[str, Sequence[dict]]], generations: int | None = None):
     """Several runs: each one's population mean (solid), centre return (dotted) and best so far (dashed) in its
-    own colour."""
+    own colour; given ``generations``, the x axis reaches that far, so that a run not yet complete shows where
+    it stands."""
     figure, axes = _figure("population mean (solid), centre (dotted), best so far (dashed)")
+    if generations is not None:
+        axes.set_xlim(0, generations)
     for number, (label, rows) in enumerate(runs):
         data, colour = curves(rows), f"C{number % 10}"
         axes.plot(data["generation"], data["mean"], color=colour, label=label)
@@ -108,6 +111,6 @@ def save_run_plot(path: Path, rows: Sequence[dict], title: str) -> None:
     write_figure(run_figure(rows, title), path, bbox_inches="tight")
 
 
-def save_comparison(path: Path, runs: Sequence[tuple[str, Sequence[dict]]]) -> None:
-    """Overlay several runs, given as (label, metrics rows), in one picture at ``path``."""
-    write_figure(comparison_figure(runs), path, bbox_inches="tight")
+def save_comparison(path: Path, runs: Sequence[tuple[str, Sequence[dict]]], generations: int | None = None) -> None:
+    """Overlay several runs, given as (label, metrics rows), in one picture at ``path`` (``comparison_figure``)."""
+    write_figure(comparison_figure(runs, generations), path, bbox_inches="tight")

@@ -105,7 +105,8 @@ def test_a_chunk_committed_and_continued_in_a_clone_is_the_uninterrupted_run(tmp
     git("commit", "-q", "-m", "chunk", cwd=repository)
     committed = set(git("ls-files", cwd=repository).split())
     relative = run.relative_to(repository)
-    assert committed == {"results/paper/.gitignore", *(f"{relative}/{name}" for name in KEPT_WHILE_RUNNING)}
+    pages = {"results/paper/progress.md", "results/paper/carracing_curves.png"}  # written at the chunk's end
+    assert committed == {"results/paper/.gitignore", *pages, *(f"{relative}/{name}" for name in KEPT_WHILE_RUNNING)}
     clone = tmp_path / "clone"
     git("clone", "-q", str(repository), str(clone), cwd=tmp_path)
     continued = paper(*SMALL, *generations, folder=clone / "results" / "paper" / "carracing_hebbian_seed1")
@@ -117,7 +118,7 @@ def test_a_chunk_committed_and_continued_in_a_clone_is_the_uninterrupted_run(tmp
     assert {path.name for path in (clone / relative).iterdir()} == finished
     assert (clone / relative / "frames.png").read_bytes() == (run_of(tmp_path / "whole") / "frames.png").read_bytes()
     git("add", "-A", cwd=clone)  # the finished run is committed whole: the weights, the evaluation, its pictures
-    assert set(git("ls-files", cwd=clone).split()) == {"results/paper/.gitignore",
+    assert set(git("ls-files", cwd=clone).split()) == {"results/paper/.gitignore", *pages,
                                                         *(f"{relative}/{name}" for name in finished)}
     assert (clone / relative / "evaluation.json").read_text() == (run_of(tmp_path / "whole") /
                                                                    "evaluation.json").read_text().replace(
@@ -297,6 +298,22 @@ def test_the_status_of_a_run_not_yet_complete_says_how_long_the_rest_takes(tmp_p
         seconds = [float(row["seconds"]) for row in csv.DictReader(handle)][:done][-10:]
     assert paper_script.main(["campaign", "--status"]) == 0
     (line,) = capsys.readouterr().out.strip().splitlines()
+    left = (30 - done) * sum(seconds) / len(seconds) / 3600
     assert line.startswith(f"carracing hebbian seed 1: {run}: generation {done} of 30; ")
-    assert line.endswith(f"; at that pace about {(30 - done) * sum(seconds) / len(seconds) / 3600:.1f} h more; "
-                         f"on {cpu_model()}, 2 workers")
+    assert line.endswith(f"; at that pace about {left:.1f} h more; on {cpu_model()}, 2 workers")
+
+    # the chunk wrote the same, partial, beside the runs, before its pid file went: the pages a stop hook commits
+    assert f"campaign: wrote {tmp_path / 'results' / 'progress.md'} and " in output
+    with open(run / "metrics.csv", newline="") as handle:
+        hours = sum(float(row["seconds"]) for row in csv.DictReader(handle) if int(row["generation"]) <= done) / 3600
+    rows = (tmp_path / "results" / "progress.md").read_text().splitlines()
+    (row,) = [row for row in rows if row.startswith("| [carracing hebbian seed 1](")]
+    assert row.startswith(f"| [carracing hebbian seed 1](carracing_hebbian_seed1/{run.name}) | {done} of 30, "
+                          f"**partial** | {hours:.2f} h | ")
+    assert f"| about {left:.1f} h ({hours + left:.1f} h in all) |" in row
+    assert row.endswith(f"| {cpu_model()}, 2 workers |")
+    assert "| carracing static seed 1 | not started | | | | | |" in rows  # the campaign's next run, in its order
+    assert (tmp_path / "results" / "carracing_curves.png").read_bytes().startswith(b"\x89PNG")
+    assert paper_script.main(["carracing", "curves", "--runs", str(tmp_path / "results")]) == 0
+    assert capsys.readouterr().out.strip() == (f"wrote {tmp_path / 'results' / 'carracing_curves.png'} "
+                                               f"(hebbian seed 1, partial: generation {done} of 30)")
