@@ -20,7 +20,9 @@ refused here too.
 Between ``<!-- result:RUN [ENVIRONMENT] -->`` and ``<!-- end result -->`` a page holds the evaluation of a
 campaign run, ``results/paper/RUN`` (``carracing_hebbian_seed1``; its newest run folder): the mean ± std of
 its evaluation.json (of ENVIRONMENT, where it evaluated several), its episodes and generation, linked to the
-file and to the run's weights; until the run is evaluated, ``PENDING``. ``<!-- frames:RUN -->`` and
+file and to the run's weights; until the run is evaluated, ``PENDING``. ``<!-- spread:RUN [ENVIRONMENT] -->`` and
+``<!-- end spread -->`` hold how its returns spread: median, quartiles, lowest and highest, and how many
+episodes fell below the mean by more than a quarter of it. ``<!-- frames:RUN -->`` and
 ``<!-- end frames -->`` hold its frames.png the same way. A run evaluated since its page was written is
 reported by ``--check`` as behind, not refused: the figures a page shows are always its files'.
 
@@ -36,6 +38,8 @@ import os
 import re
 import sys
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 for folder in (ROOT, ROOT / "benchmarks"):
@@ -198,8 +202,8 @@ def render_figures(text: str, page: Path, results: Path = records.RESULTS) -> st
 
 
 RUNS = ROOT / "results" / "paper"  # the campaign's run folders
-RESULT = re.compile(r"(?<!`)(<!-- result:(?P<run>[\w.-]+)(?: (?P<environment>[\w.:-]+))? -->)(?P<text>.*?)"
-                    r"(?P<end><!-- end result -->)")
+RESULT = re.compile(r"(?<!`)(<!-- (?P<what>result|spread):(?P<run>[\w.-]+)(?: (?P<environment>[\w.:-]+))? -->)"
+                    r"(?P<text>.*?)(?P<end><!-- end (?P=what) -->)")
 FRAMES = re.compile(r"(?<!`)(<!-- frames:(?P<run>[\w.-]+) -->)(?P<text>.*?)(?P<end><!-- end frames -->)")
 PENDING = "not yet: training in the campaign"
 FRAMES_PENDING = "(the agent's frames, once its run is evaluated)"
@@ -215,33 +219,62 @@ def link(path: Path, page: Path) -> str:
     return Path(os.path.relpath(path, page.parent)).as_posix()
 
 
+def evaluation_of(name: str, environment: str | None, runs: Path) -> tuple[Path, dict, dict] | None:
+    """The newest run of ``runs/name``, its evaluation.json and the entry of ``environment`` there (the only one,
+    where None); None until the run is evaluated."""
+    run = evaluated(name, runs)
+    if run is None:
+        return None
+    try:
+        evaluation = read_json(run / "evaluation.json")
+        entries = evaluation["environments"]
+        found = ", ".join(entry["environment"] for entry in entries)
+    except (KeyError, TypeError, ValueError, OSError, *USER_ERRORS) as error:
+        raise FigureError(f"{name}: {run} is not a run this tool evaluated ({type(error).__name__}: {error})") from None
+    chosen = [entry for entry in entries if environment in (None, entry["environment"])]
+    if len(chosen) != 1:
+        raise FigureError(f"{name}: {'no' if not chosen else 'several'} environment{'' if environment else 's'} "
+                          f"{environment or ''} in {run / 'evaluation.json'} ({found}); name one in the marker")
+    return run, evaluation, chosen[0]
+
+
 def result(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
     """One campaign run's evaluation: "**903 ± 45.1** (100 episodes on held-out seeds, generation 300 after 7.31 h
     of training on AMD EPYC 7B13, 2 workers, weights)"; the hours are the sum of metrics.csv's ``seconds``, the
     machines config.json's record."""
-    run = evaluated(name, runs)
-    if run is None:
+    found = evaluation_of(name, environment, runs)
+    if found is None:
         return PENDING
+    run, evaluation, entry = found
     try:
-        evaluation = read_json(run / "evaluation.json")
-        entries = evaluation["environments"]
-        chosen = [entry for entry in entries if environment in (None, entry["environment"])]
-        if len(chosen) != 1:
-            found = ", ".join(entry["environment"] for entry in entries)
-            raise FigureError(f"{name}: {'no' if not chosen else 'several'} environment{'' if environment else 's'} "
-                              f"{environment or ''} in {run / 'evaluation.json'} ({found}); name one in the marker")
-        (entry,) = chosen
         seeds = "on held-out seeds" if evaluation["seed"] >= HELD_OUT_SEED else f"from seed {evaluation['seed']}"
         progress = campaign.measure(run)
         generation, hours, machines = progress.done, progress.hours, progress.machines
         mean, std, episodes = number(entry["mean"]), number(entry["std"]), entry["episodes"]
     except (KeyError, TypeError, ValueError, OSError, *USER_ERRORS) as error:
-        if isinstance(error, FigureError):
-            raise
         raise FigureError(f"{name}: {run} is not a run this tool evaluated ({type(error).__name__}: {error})") from None
     return (f"**{mean} ± {std}** ([{episodes} episodes {seeds}]({link(run / 'evaluation.json', page)}), generation "
             f"{generation} after {number(hours)} h of training" + (f" on {machines}" if machines else "")
             + f", [weights]({link(run, page)}))")
+
+
+def spread(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
+    """How one campaign run's evaluation returns spread: "median 905, quartiles 888–915, lowest 106, highest 936;
+    4 of 100 episodes below three quarters of the mean (650)" (numpy's percentiles, linear)."""
+    found = evaluation_of(name, environment, runs)
+    if found is None:
+        return PENDING
+    run, _, entry = found
+    try:
+        returns = np.asarray(entry["returns"], dtype=np.float64)
+        low, median, high = np.percentile(returns, [25, 50, 75])
+        floor = 0.75 * returns.mean()
+    except (KeyError, TypeError, ValueError, IndexError) as error:
+        raise FigureError(f"{name}: {run / 'evaluation.json'} holds no returns ({type(error).__name__}: {error})") \
+            from None
+    return (f"median {number(median)}, quartiles {number(low)}–{number(high)}, lowest {number(returns.min())}, "
+            f"highest {number(returns.max())}; {int((returns < floor).sum())} of {returns.size} episodes below three "
+            f"quarters of the mean ({number(floor)})")
 
 
 def frames(name: str, page: Path, runs: Path = RUNS) -> str:
@@ -260,8 +293,9 @@ def render_results(text: str, page: Path, runs: Path = RUNS, behind: list[str] |
             rendered = pending
         return match[1] + rendered + match["end"]
 
-    text = RESULT.sub(lambda match: rewrite(match, result(match["run"], match["environment"], page, runs), PENDING),
-                      text)
+    writers = {"result": result, "spread": spread}
+    text = RESULT.sub(lambda match: rewrite(match, writers[match["what"]](match["run"], match["environment"], page,
+                                                                          runs), PENDING), text)
     return FRAMES.sub(lambda match: rewrite(match, frames(match["run"], page, runs), FRAMES_PENDING), text)
 
 

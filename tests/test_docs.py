@@ -663,6 +663,15 @@ def test_a_campaign_result_is_rendered_from_its_evaluation(evaluated_runs):
     assert rendered == (f"| <!-- result:carracing_hebbian_seed1 -->{cell}<!-- end result --> | "
                         f"<!-- result:carracing_hebbian_seed1 CarRacing-v3 -->{cell}<!-- end result --> |")
     assert generate.render_results(rendered, page, evaluated_runs) == rendered  # the check the pages pass
+    # the spread, for 2 episodes written from the definition: numpy's linear percentile is lo + p * (hi - lo)
+    lo, hi = sorted(returns)
+    floor = 0.75 * mean
+    below = sum(value < floor for value in returns)
+    spread = (f"median {generate.number(lo + 0.5 * (hi - lo))}, quartiles {generate.number(lo + 0.25 * (hi - lo))}–"
+              f"{generate.number(lo + 0.75 * (hi - lo))}, lowest {generate.number(lo)}, highest {generate.number(hi)}; "
+              f"{below} of 2 episodes below three quarters of the mean ({generate.number(floor)})")
+    marker = "<!-- spread:carracing_hebbian_seed1 CarRacing-v3 -->{}<!-- end spread -->"
+    assert generate.render_results(marker.format("old"), page, evaluated_runs) == marker.format(spread)
     strip = generate.render_results("<!-- frames:carracing_hebbian_seed1 --><!-- end frames -->", page, evaluated_runs)
     assert f"]({os.path.relpath(run / 'frames.png', page.parent)})<!-- end frames -->" in strip
     with pytest.raises(generate.FigureError, match=r"no environment CarRacing-v2 in .* \(CarRacing-v3\)"):
@@ -675,6 +684,8 @@ def test_a_campaign_result_not_yet_evaluated_is_pending_and_a_late_page_is_behin
     pending = f"<!-- result:carracing_static_seed1 -->{generate.PENDING}<!-- end result -->"
     assert generate.render_results("<!-- result:carracing_static_seed1 -->x<!-- end result -->", page,
                                    evaluated_runs) == pending  # no such run
+    assert generate.render_results("<!-- spread:carracing_static_seed1 -->x<!-- end spread -->", page,
+                                   evaluated_runs) == pending.replace("result", "spread")
     shutil.copytree(evaluated_runs / "carracing_hebbian_seed1", tmp_path / "carracing_hebbian_seed1")
     (run,) = [path for path in (tmp_path / "carracing_hebbian_seed1").iterdir() if path.is_dir()]
     (run / "evaluation.json").rename(run / "later.json")  # trained, not yet evaluated
