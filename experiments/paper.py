@@ -426,8 +426,9 @@ def write_pages(runs: Path, experiment: str) -> None:
     try:
         files.atomic_write_text(runs / campaign.PROGRESS, progress_page(runs))
         written = curves_figure(runs, experiment)
-    except (OSError, ValueError) as error:
-        say(f"campaign: the progress page or the curves in {shown(runs)} could not be written: {error}")
+    except (OSError, KeyError, *USER_ERRORS, ValueError) as error:  # a run folder's file unreadable, or no room
+        say(f"campaign: the progress page or the curves in {shown(runs)} could not be written: "
+            f"{type(error).__name__}: {error}")
         return
     say(f"campaign: wrote {shown(runs / campaign.PROGRESS)}" + (f" and {shown(written[0])}" if written else ""))
 

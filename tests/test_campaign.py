@@ -317,3 +317,19 @@ def test_the_status_of_a_run_not_yet_complete_says_how_long_the_rest_takes(tmp_p
     assert paper_script.main(["carracing", "curves", "--runs", str(tmp_path / "results")]) == 0
     assert capsys.readouterr().out.strip() == (f"wrote {tmp_path / 'results' / 'carracing_curves.png'} "
                                                f"(hebbian seed 1, partial: generation {done} of 30)")
+
+
+def test_a_chunks_pages_name_a_run_they_cannot_read_and_end_the_chunk_cleanly(tmp_path, capsys):
+    """The progress page and the curves are written after the chunk's run is saved: a run folder beside it
+    whose checkpoint cannot be read is named in one line, and nothing is raised, nothing written half."""
+    import experiments.paper as paper_script
+
+    broken = tmp_path / "carracing_static_seed1" / "20260101-000000_CarRacing-v0_seed1"
+    broken.mkdir(parents=True)
+    (broken / "checkpoint.npz").write_bytes(b"not a checkpoint")
+    (broken / "config.json").write_text('{"run": {"generations": 300}}')
+    paper_script.write_pages(tmp_path, "carracing")
+    line = capsys.readouterr().out.strip()
+    assert line.startswith(f"campaign: the progress page or the curves in {tmp_path} could not be written: "
+                           f"RunFolderError: cannot resume from {broken / 'checkpoint.npz'}: not a readable checkpoint")
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["carracing_static_seed1"]
