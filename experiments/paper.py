@@ -134,8 +134,14 @@ def experiment_folder(args: argparse.Namespace, experiment: dict) -> Path:
     """Where the experiment's runs go: by default results/paper/<experiment>_<kind>_seed<seed>, relative to the
     repository's root, where the training runs (config.json stays portable); a --folder given, resolved from
     where this command runs. ``ROOT / folder`` is the folder in both cases."""
+    return Path(args.folder).resolve() if args.folder else RESULTS / run_name(args, experiment)
+
+
+def run_name(args: argparse.Namespace, experiment: dict) -> str:
+    """The folder name of an experiment's runs with its seed (the file's, where none is given):
+    ``carracing_hebbian_seed1``."""
     seed = args.seed if args.seed is not None else experiment["run"]["seed"]
-    return Path(args.folder).resolve() if args.folder else RESULTS / f"{args.experiment}_{args.kind}_seed{seed}"
+    return f"{args.experiment}_{args.kind}_seed{seed}"
 
 
 def latest_run(folder: Path) -> Path | None:
@@ -457,8 +463,8 @@ def campaign_runs(runs: Path) -> list[tuple[str, Path]]:
     folder in ``runs``."""
     named = []
     for args in campaign_entries():
-        seed = args.seed if args.seed is not None else load_experiment(args)[1]["run"]["seed"]
-        named.append((f"{args.experiment} {args.kind} seed {seed}", runs / f"{args.experiment}_{args.kind}_seed{seed}"))
+        name = run_name(args, load_experiment(args)[1])
+        named.append((name.replace("_seed", " seed ").replace("_", " "), runs / name))
     return named
 
 
