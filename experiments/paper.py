@@ -473,12 +473,19 @@ def status() -> int:
     and environment steps of the last ten generations, the last population mean and centre, for a run not
     yet complete the time its remaining generations would take at the last ten's pace, and the machines it ran
     on (config.json's record)."""
+    code = 0
     for name, folder in campaign_runs(ROOT / RESULTS):
         run_dir = latest_run(folder)
         if run_dir is None:
             say(f"{name}: not started")
             continue
-        progress = campaign.measure(run_dir)
+        try:
+            progress = campaign.measure(run_dir)
+        except (OSError, KeyError, *USER_ERRORS, ValueError) as error:
+            print(f"paper.py: error: {name}: {shown(run_dir)} cannot be read ({type(error).__name__}: {error})",
+                  file=sys.stderr)
+            code = 2
+            continue
         line = (f"{name}: {shown(run_dir)}: generation {progress.done} of {progress.total}"
                 + (" (evaluated)" if progress.evaluated else ""))
         if progress.pace is not None:
@@ -490,7 +497,7 @@ def status() -> int:
         if progress.machines:
             line += f"; on {progress.machines}"
         say(line)
-    return 0
+    return code
 
 
 def progress_page(runs: Path) -> str:

@@ -333,3 +333,21 @@ def test_a_chunks_pages_name_a_run_they_cannot_read_and_end_the_chunk_cleanly(tm
     assert line.startswith(f"campaign: the progress page or the curves in {tmp_path} could not be written: "
                            f"RunFolderError: cannot resume from {broken / 'checkpoint.npz'}: not a readable checkpoint")
     assert sorted(path.name for path in tmp_path.iterdir()) == ["carracing_static_seed1"]
+
+
+def test_the_status_names_a_run_it_cannot_read_and_goes_on(tmp_path, monkeypatch, capsys):
+    import experiments.paper as paper_script
+
+    entries = tmp_path / "campaign.toml"
+    entries.write_text('runs = ["carracing static --seed 1", "ant static --seed 1"]\n')
+    monkeypatch.setattr(paper_script, "CAMPAIGN", entries)
+    monkeypatch.setattr(paper_script, "RESULTS", tmp_path / "results")
+    broken = tmp_path / "results" / "carracing_static_seed1" / "20260101-000000_CarRacing-v0_seed1"
+    broken.mkdir(parents=True)
+    (broken / "checkpoint.npz").write_bytes(b"not a checkpoint")
+    (broken / "config.json").write_text('{"run": {"generations": 300}}')
+    assert paper_script.main(["campaign", "--status"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out.strip() == "ant static seed 1: not started"
+    assert captured.err.strip().startswith(f"paper.py: error: carracing static seed 1: {broken} cannot be read "
+                                           "(RunFolderError: cannot resume from")
