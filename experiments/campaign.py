@@ -208,6 +208,7 @@ class Progress:
     mean: float | None  # the last generation's population mean fitness and centre return
     centre: float | None
     machines: str  # config.json's record of the machines (report.machine.machines_text)
+    step_limit: int | None = None  # the most environment steps a generation can take (generation_step_limit)
 
     @property
     def complete(self) -> bool:
@@ -218,6 +219,48 @@ class Progress:
         """The remaining generations at the last ones' pace. Generations grow longer as a run learns to stay in
         its episodes, so early on this says too little."""
         return None if self.complete or self.pace is None else (self.total - self.done) * self.pace / 3600
+
+    @property
+    def hours_at_most(self) -> float | None:
+        """The remaining generations if every episode ran to its time limit, at the last generations' cost per
+        environment step: the bound to ``hours_left``, which early in a run says too little. None where an
+        environment has no time limit."""
+        if self.complete or self.pace is None or not self.steps or self.step_limit is None:
+            return None
+        return (self.total - self.done) * self.step_limit * (self.pace / self.steps) / 3600
+
+
+def generation_step_limit(config: dict) -> int | None:
+    """The most environment steps one generation of the run ``config`` (its config.json) can take: every
+    member's and the centre's episodes, and its share of the centre's evaluation episodes (``eval_episodes``
+    every ``eval_every``-th generation, rounded up), on every training environment, each to its time limit
+    (``--max_episode_steps``, else the one its registration gives). None where an environment has none, or is
+    not registered here."""
+    import importlib
+
+    import gymnasium as gym
+
+    import envs  # noqa: F401  (registers the pyBullet environments, the damaged ants, the fast CarRacing)
+
+    cap = config["env"].get("max_episode_steps")
+    limits = []
+    for env_id in config["env"]["env_ids"]:
+        module, _, name = env_id.rpartition(":")
+        try:
+            if module:
+                importlib.import_module(module)
+        except Exception:  # a custom environment's module that does not import here: no bound
+            return None
+        spec = gym.registry.get(name)
+        known = [limit for limit in (cap, spec.max_episode_steps if spec is not None else None) if limit]
+        if not known:
+            return None
+        limits.append(min(known))
+    es = config["es"]
+    episodes = (es["popsize"] + 1) * es.get("episodes", 1)
+    if es.get("eval_every"):
+        episodes += -(-es.get("eval_episodes", 0) // es["eval_every"])
+    return episodes * sum(limits)
 
 
 def measure(run_dir: Path) -> Progress:
@@ -238,4 +281,4 @@ def measure(run_dir: Path) -> Progress:
         steps=sum(int(row["env_steps"]) for row in last) / len(last) if last else None,
         mean=float(rows[-1]["fitness_mean"]) if rows else None,
         centre=float(rows[-1]["center_return"]) if rows else None,
-        machines=machines_text(config.get("machines", [])))
+        machines=machines_text(config.get("machines", [])), step_limit=generation_step_limit(config))

@@ -494,6 +494,8 @@ def status() -> int:
                      f"population mean {progress.mean:.1f}, centre {progress.centre:.1f}")
             if not progress.complete:
                 line += f"; at that pace about {progress.hours_left:.1f} h more"
+                if progress.hours_at_most is not None:
+                    line += f", at most {progress.hours_at_most:.1f} h if every episode ran to its time limit"
         if progress.machines:
             line += f"; on {progress.machines}"
         say(line)
@@ -508,8 +510,10 @@ def progress_page(runs: Path) -> str:
              f"`seconds` and `env_steps` of its `metrics.csv` (the mean of the last {campaign.PACE} generations is "
              "the pace), the machines its `config.json` records. A run not yet complete is **partial**: its "
              "figures are those of the generations done so far, and its remaining time is the last generations' "
-             "pace times the generations left (generations grow longer as a run learns to stay in its episodes).", "",
-             "| run | generation | training so far | last generations, each | remaining, at that pace "
+             "pace times the generations left. Generations grow longer as a run learns to stay in its episodes, so "
+             "early in a run that says too little; the bound beside it is every remaining episode run to its "
+             "environment's time limit at the last generations' cost per environment step.", "",
+             "| run | generation | training so far | last generations, each | remaining, at that pace; at most "
              "| population mean, centre | machines |",
              "|---|---|---|---|---|---|---|"]
     for name, folder in campaign_runs(runs):
@@ -522,7 +526,9 @@ def progress_page(runs: Path) -> str:
                  else "**partial**")
         cost = (f"{progress.pace:.1f} s, {progress.steps:,.0f} env steps" if progress.pace is not None else "")
         left = ("" if progress.hours_left is None
-                else f"about {progress.hours_left:.1f} h ({progress.hours + progress.hours_left:.1f} h in all)")
+                else f"about {progress.hours_left:.1f} h ({progress.hours + progress.hours_left:.1f} h in all)"
+                + ("" if progress.hours_at_most is None else
+                   f"; at most {progress.hours_at_most:.1f} h ({progress.hours + progress.hours_at_most:.1f} h)"))
         fitness = f"{progress.mean:.1f}, {progress.centre:.1f}" if progress.mean is not None else ""
         lines.append(f"| [{name}]({run_dir.relative_to(runs).as_posix()}) | {progress.done} of {progress.total}, "
                      f"{state} | {progress.hours:.2f} h | {cost} | {left} | {fitness} | {progress.machines} |")

@@ -7,6 +7,7 @@ everything saved; the pid file; a second SIGINT; a second campaign refused; what
 from __future__ import annotations
 
 import csv
+import dataclasses
 import os
 import shutil
 import signal
@@ -295,12 +296,17 @@ def test_the_status_of_a_run_not_yet_complete_says_how_long_the_rest_takes(tmp_p
     run = run_of(folder)
     done = read_checkpoint(run / "checkpoint.npz").generation
     with open(run / "metrics.csv", newline="") as handle:
-        seconds = [float(row["seconds"]) for row in csv.DictReader(handle)][:done][-10:]
+        last = list(csv.DictReader(handle))[:done][-10:]
+    seconds, steps = [float(row["seconds"]) for row in last], [int(row["env_steps"]) for row in last]
     assert paper_script.main(["campaign", "--status"]) == 0
     (line,) = capsys.readouterr().out.strip().splitlines()
     left = (30 - done) * sum(seconds) / len(seconds) / 3600
+    # the bound: 4 members and the centre, 1 episode each, every one to CarRacing's 1000 steps, at the same cost
+    # per step as the last generations'
+    most = (30 - done) * 5 * 1000 * sum(seconds) / sum(steps) / 3600
     assert line.startswith(f"carracing hebbian seed 1: {run}: generation {done} of 30; ")
-    assert line.endswith(f"; at that pace about {left:.1f} h more; on {cpu_model()}, 2 workers")
+    assert line.endswith(f"; at that pace about {left:.1f} h more, at most {most:.1f} h if every episode ran to its "
+                         f"time limit; on {cpu_model()}, 2 workers")
 
     # the chunk wrote the same, partial, beside the runs, before its pid file went: the pages a stop hook commits
     assert f"campaign: wrote {tmp_path / 'results' / 'progress.md'} and " in output
@@ -310,13 +316,40 @@ def test_the_status_of_a_run_not_yet_complete_says_how_long_the_rest_takes(tmp_p
     (row,) = [row for row in rows if row.startswith("| [carracing hebbian seed 1](")]
     assert row.startswith(f"| [carracing hebbian seed 1](carracing_hebbian_seed1/{run.name}) | {done} of 30, "
                           f"**partial** | {hours:.2f} h | ")
-    assert f"| about {left:.1f} h ({hours + left:.1f} h in all) |" in row
+    assert f"| about {left:.1f} h ({hours + left:.1f} h in all); at most {most:.1f} h ({hours + most:.1f} h) |" in row
     assert row.endswith(f"| {cpu_model()}, 2 workers |")
     assert "| carracing static seed 1 | not started | | | | | |" in rows  # the campaign's next run, in its order
     assert (tmp_path / "results" / "carracing_curves.png").read_bytes().startswith(b"\x89PNG")
     assert paper_script.main(["carracing", "curves", "--runs", str(tmp_path / "results")]) == 0
     assert capsys.readouterr().out.strip() == (f"wrote {tmp_path / 'results' / 'carracing_curves.png'} "
                                                f"(hebbian seed 1, partial: generation {done} of 30)")
+
+
+def test_a_generations_step_limit_is_its_episodes_each_to_its_time_limit(monkeypatch):
+    """The bound on a run's remaining time: (members + centre) x episodes on every training environment, plus
+    the centre's evaluation share, each episode to --max_episode_steps or else its registered limit."""
+    import gymnasium as gym
+
+    from experiments.campaign import generation_step_limit
+
+    def config(env_ids, cap=None, **es):
+        return {"env": {"env_ids": env_ids, "max_episode_steps": cap},
+                "es": {"popsize": 200, "episodes": 1, "eval_every": None, "eval_episodes": 10, **es}}
+
+    assert generation_step_limit(config(["CarRacing-v3"])) == 201 * 1000
+    # the damaged-ant experiment trains on two bodies: each member runs an episode on both
+    assert generation_step_limit(config(["AntBulletEnv-v0", "AntAsymRightBulletEnv-v0"])) == 201 * 2000
+    assert generation_step_limit(config(["CartPole-v1"], episodes=3)) == 201 * 3 * 500
+    assert generation_step_limit(config(["CartPole-v1"], cap=200)) == 201 * 200  # the smaller limit counts
+    assert generation_step_limit(config(["CartPole-v1"], cap=900)) == 201 * 500
+    # 10 evaluation episodes every 4th generation: 3 a generation, rounded up
+    assert generation_step_limit(config(["CartPole-v1"], eval_every=4)) == (201 + 3) * 500
+    # an environment with no time limit, or one whose module does not import here: no bound
+    monkeypatch.setitem(gym.registry, "Unlimited-v0", dataclasses.replace(gym.registry["CartPole-v1"],
+                                                                          id="Unlimited-v0", max_episode_steps=None))
+    assert generation_step_limit(config(["CartPole-v1", "Unlimited-v0"])) is None
+    assert generation_step_limit(config(["Unlimited-v0"], cap=300)) == 201 * 300
+    assert generation_step_limit(config(["no_such_module_here:Thing-v0"])) is None
 
 
 def test_a_chunks_pages_name_a_run_they_cannot_read_and_end_the_chunk_cleanly(tmp_path, capsys):
