@@ -280,14 +280,31 @@ def profiles(scores: dict[str, list[float]], taus: np.ndarray, reps: int = DEFAU
 # --- outputs --------------------------------------------------------------------------------------
 
 
+NO_INTERVAL = "(no interval: 1 run)"
+
+
 def markdown(summaries: list[Summary], pairs: list[Improvement], score: str) -> str:
+    """The summary table and the pairs' table. A group of one run has no interval: every bootstrap resample of
+    it is that run again, so the interval rliable returns is the point itself, and the table says so instead;
+    so does a pair with such a group on either side."""
+    runs = {s.group: s.runs for s in summaries}
+
+    def interval(low: float, high: float, count: int, digits: int) -> str:
+        return f"[{low:.{digits}f}, {high:.{digits}f}]" if count > 1 else NO_INTERVAL
+
     lines = ["| group | runs | IQM (95 % CI) | mean (95 % CI) | median |", "|---|---|---|---|---|"]
-    lines += [f"| {s.group} | {s.runs} | {s.iqm:.1f} [{s.iqm_low:.1f}, {s.iqm_high:.1f}] | "
-              f"{s.mean:.1f} [{s.mean_low:.1f}, {s.mean_high:.1f}] | {s.median:.1f} |" for s in summaries]
+    lines += [f"| {s.group} | {s.runs} | {s.iqm:.1f} {interval(s.iqm_low, s.iqm_high, s.runs, 1)} | "
+              f"{s.mean:.1f} {interval(s.mean_low, s.mean_high, s.runs, 1)} | {s.median:.1f} |" for s in summaries]
     if pairs:
         lines += ["", "| X | Y | P(X > Y) (95 % CI) |", "|---|---|---|"]
-        lines += [f"| {p.x} | {p.y} | {p.probability:.2f} [{p.low:.2f}, {p.high:.2f}] |" for p in pairs]
-    return "\n".join(lines) + f"\n\nScore of a run: {score} (report/stats.py).\n"
+        lines += [f"| {p.x} | {p.y} | {p.probability:.2f} "
+                  f"{interval(p.low, p.high, min(runs[p.x], runs[p.y]), 2)} |" for p in pairs]
+    text = "\n".join(lines) + f"\n\nScore of a run: {score} (report/stats.py).\n"
+    single = [s.group for s in summaries if s.runs == 1]
+    if single:
+        text += (f"\n{', '.join(single)}: one run, so no interval, and a probability of improvement against it "
+                 f"compares single runs; train more seeds before reading a difference from this report.\n")
+    return text
 
 
 def csv_text(rows: list[dict]) -> str:

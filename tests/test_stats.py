@@ -161,6 +161,25 @@ def test_report_files_from_run_folders(tmp_path, rliable):
     assert (out / "summary.csv").read_text() == first
 
 
+def test_a_group_of_one_run_has_no_interval(tmp_path, rliable):
+    """One run per group: the bootstrap resamples that run alone, so the report gives the point and says there
+    is no interval, instead of the point twice as a 95 % interval; a pair with such a group likewise."""
+    static = group_of(tmp_path, "static", [10.0])
+    hebbian = group_of(tmp_path, "hebbian", [15.0, 25.0, 35.0, 500.0])
+    text = stats.report([static, hebbian], tmp_path / "out", reps=REPS, seed=3).markdown
+    assert f"| static | 1 | 10.0 {stats.NO_INTERVAL} | 10.0 {stats.NO_INTERVAL} | 10.0 |" in text
+    assert "| hebbian | 4 | 30.0 [" in text
+    assert f"| hebbian | static | 1.00 {stats.NO_INTERVAL} |" in text
+    assert f"| static | hebbian | 0.00 {stats.NO_INTERVAL} |" in text
+    assert text.rstrip().endswith("static: one run, so no interval, and a probability of improvement against it "
+                                  "compares single runs; train more seeds before reading a difference from this "
+                                  "report.")
+    assert (tmp_path / "out" / "summary.md").read_text() == text
+    two = stats.report([group_of(tmp_path, "a", [1.0, 2.0]), group_of(tmp_path, "b", [3.0, 4.0])],
+                       tmp_path / "two", reps=REPS, seed=3).markdown
+    assert "no interval" not in two and "| a | 2 | 1.5 [" in two
+
+
 def test_refusals(tmp_path):
     static = group_of(tmp_path, "static", [1.0, 2.0])
     with pytest.raises(stats.StatsError, match="no run folder"):
