@@ -234,17 +234,20 @@ def generation_step_limit(config: dict) -> int | None:
     """The most environment steps one generation of the run ``config`` (its config.json) can take: every
     member's and the centre's episodes, and its share of the centre's evaluation episodes (``eval_episodes``
     every ``eval_every``-th generation, rounded up), on every training environment, each to its time limit
-    (``--max_episode_steps``, else the one its registration gives). None where an environment has none, or is
-    not registered here."""
+    (``--max_episode_steps``, else the one its registration gives). None where an environment has none, is not
+    registered here, or the config does not record its settings."""
     import importlib
 
     import gymnasium as gym
 
     import envs  # noqa: F401  (registers the pyBullet environments, the damaged ants, the fast CarRacing)
 
-    cap = config["env"].get("max_episode_steps")
+    env, es = config.get("env", {}), config.get("es", {})
+    if not env.get("env_ids") or "popsize" not in es:
+        return None
+    cap = env.get("max_episode_steps")
     limits = []
-    for env_id in config["env"]["env_ids"]:
+    for env_id in env["env_ids"]:
         module, _, name = env_id.rpartition(":")
         try:
             if module:
@@ -256,7 +259,6 @@ def generation_step_limit(config: dict) -> int | None:
         if not known:
             return None
         limits.append(min(known))
-    es = config["es"]
     episodes = (es["popsize"] + 1) * es.get("episodes", 1)
     if es.get("eval_every"):
         episodes += -(-es.get("eval_episodes", 0) // es["eval_every"])

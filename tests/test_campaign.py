@@ -350,6 +350,7 @@ def test_a_generations_step_limit_is_its_episodes_each_to_its_time_limit(monkeyp
     assert generation_step_limit(config(["CartPole-v1", "Unlimited-v0"])) is None
     assert generation_step_limit(config(["Unlimited-v0"], cap=300)) == 201 * 300
     assert generation_step_limit(config(["no_such_module_here:Thing-v0"])) is None
+    assert generation_step_limit({"env": {"env_ids": ["CartPole-v1"]}}) is None  # a config without its settings
 
 
 def test_a_chunks_pages_name_a_run_they_cannot_read_and_end_the_chunk_cleanly(tmp_path, capsys):
