@@ -235,9 +235,9 @@ def generation_step_limit(config: dict) -> int | None:
     member's and the centre's episodes, and its share of the centre's evaluation episodes (``eval_episodes``
     every ``eval_every``-th generation, rounded up), on every training environment, each to its time limit
     (``--max_episode_steps``, else the one its registration gives). None where an environment has none, is not
-    registered here, or the config does not record its settings."""
-    import importlib
+    registered here, or the config does not record its settings.
 
+    config.json is data: a ``module:EnvId`` it names is looked up among what is registered, never imported."""
     import gymnasium as gym
 
     import envs  # noqa: F401  (registers the pyBullet environments, the damaged ants, the fast CarRacing)
@@ -248,13 +248,7 @@ def generation_step_limit(config: dict) -> int | None:
     cap = env.get("max_episode_steps")
     limits = []
     for env_id in env["env_ids"]:
-        module, _, name = env_id.rpartition(":")
-        try:
-            if module:
-                importlib.import_module(module)
-        except Exception:  # a custom environment's module that does not import here: no bound
-            return None
-        spec = gym.registry.get(name)
+        spec = gym.registry.get(env_id.rpartition(":")[2])
         known = [limit for limit in (cap, spec.max_episode_steps if spec is not None else None) if limit]
         if not known:
             return None

@@ -344,12 +344,15 @@ def test_a_generations_step_limit_is_its_episodes_each_to_its_time_limit(monkeyp
     assert generation_step_limit(config(["CartPole-v1"], cap=900)) == 201 * 500
     # 10 evaluation episodes every 4th generation: 3 a generation, rounded up
     assert generation_step_limit(config(["CartPole-v1"], eval_every=4)) == (201 + 3) * 500
-    # an environment with no time limit, or one whose module does not import here: no bound
+    # an environment with no time limit, or one not registered here: no bound
     monkeypatch.setitem(gym.registry, "Unlimited-v0", dataclasses.replace(gym.registry["CartPole-v1"],
                                                                           id="Unlimited-v0", max_episode_steps=None))
     assert generation_step_limit(config(["CartPole-v1", "Unlimited-v0"])) is None
     assert generation_step_limit(config(["Unlimited-v0"], cap=300)) == 201 * 300
     assert generation_step_limit(config(["no_such_module_here:Thing-v0"])) is None
+    # a module a config.json names is never imported: reading a run folder runs none of its code
+    assert generation_step_limit(config(["this:Unregistered-v0"])) is None
+    assert "this" not in sys.modules or not hasattr(sys.modules["this"], "s")
     assert generation_step_limit({"env": {"env_ids": ["CartPole-v1"]}}) is None  # a config without its settings
 
 
