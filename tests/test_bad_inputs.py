@@ -431,8 +431,10 @@ CASES = {
                            "4", "--episodes", "1", "--threads", "1", "--folder", str(work / "front")],
         "the static+reservoir arm: --reservoir draws ER-MRL's reservoirs with reservoirpy, which is not installed",
         prepare=hidden_reservoirpy, env={"PYTHONPATH": "hidden"}),
+    # a folder of its own: the repository's results/paper holds the campaign's runs, which a bad value resumes
     "paper.py --dry-run with a bad value": Case(lambda run, work: ["experiments/paper.py", "ant", "static", "--dry-run",
-                                                                   "--popsize", "1"], "--popsize must be a whole"),
+                                                                   "--popsize", "1", "--folder", str(work / "new")],
+                                                "--popsize must be a whole"),
     "paper.py on a folder with other settings": Case(
         lambda run, work: ["experiments/paper.py", "ant", "static", "--dry-run", "--popsize", "8", "--folder",
                            str(work)],
