@@ -10,15 +10,19 @@ normalisation, reservoir) and the environment come from its config.json (``Train
 resume does); a flag that contradicts the recording is refused naming both values, and ``--environment``
 may name others (a body the run did not train on). The run's other files of the same ``best``/``last``
 prefix (the CNN, co-evolved initial weights, evolved reservoir hyperparameters) are found beside the
-file; observation statistics (``<name>.obs_norm.npz``, ``es.observations``) too. The original program's
-``.dat`` files, outside a run folder, are evaluated with the flags given, as the original did.
+file; observation statistics (``<name>.obs_norm.npz``, ``es.observations``) too. ``--centre`` picks a run
+folder's ``last`` or ``best`` centre; where the folder keeps only its checkpoint (a campaign's run, before
+training is complete or after the pruning of ``best*``), the centre is read from ``checkpoint.npz``
+(``SavedCentre``). The original program's ``.dat`` files, outside a run folder, are evaluated with the
+flags given, as the original did.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import sys
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -30,9 +34,9 @@ from cli.hints import EVALUATE_SCRIPTS, RESERVOIR_FILE
 from cli.train import resolve_environments
 from envs import ProblemSpec
 from envs.headless import RenderingUnavailable, check_can_render, check_display, choose_mujoco_gl
-from es.files import read_json
+from es.files import read_json, read_metrics
 from es.interrupts import honour_sigint
-from es.observations import SavedStatistics, load_statistics, statistics_path
+from es.observations import RunningStat, SavedStatistics, load_statistics, statistics_path
 from es.outputs import JSON_SUFFIXES
 from es.outputs import check_outputs as check_paths
 from es.runfolder import named_file, read_checkpoint
@@ -42,6 +46,7 @@ from report.video import STRIP_EVERY, VIDEO_SUFFIXES
 from settings import EPISODE_SEED_RANGE, SEED_RANGE, unmet_requirement
 
 FROM_RUN = "the run's, from the config.json beside the weights; else"
+CENTRES = ("last", "best")  # a run folder's centres: the final one, the one with the best training return
 
 
 def evaluation_parser(prog: str, description: str, kind: str) -> Parser:
@@ -56,6 +61,10 @@ def evaluation_parser(prog: str, description: str, kind: str) -> Parser:
     for file in others:
         add(file.flag, default=None, metavar="FILE",
             help=f"the .dat file of {file.holds} (default: in a run folder, the one beside the {main.holds})")
+    add("--centre", choices=CENTRES, default=None,
+        help="with a run folder: which of its centres to evaluate, last (the final centre, the default) or best (the "
+             "centre with the best training return); where the folder keeps only checkpoint.npz (a campaign's run), "
+             "read from there")
     add(RESERVOIR_FILE.flag, default=None, metavar="FILE",
         help=f"{RESERVOIR_FILE.holds} (default: in a run folder, best_reservoir.dat or last_reservoir.dat beside the "
              f"{main.holds})")
@@ -99,14 +108,17 @@ def check_outputs(args: argparse.Namespace, inputs: list[str]) -> None:
         "--plot", args.plot, FIGURE_SUFFIXES), ("--video", args.video, VIDEO_SUFFIXES)) if path is not None], inputs)
 
 
-def write_outputs(args: argparse.Namespace, command: list[str], kind: str, reports, problem, params) -> None:
-    """The --json and --plot files the user asked for (the video is written during its episode)."""
+def write_outputs(args: argparse.Namespace, command: list[str], kind: str, reports, problem, params,
+                  centre: SavedCentre | None = None) -> None:
+    """The --json and --plot files the user asked for (the video is written during its episode); the JSON says
+    which of a run's centres was evaluated (``SavedCentre.record``)."""
     from envs.evaluation import trace_episode
     from es.files import write_json
     from report.adaptation import plot_adaptation, steps_text
 
     if args.json:
         write_json(Path(args.json), {"kind": kind, "command": command, "episodes": args.episodes, "seed": args.seed,
+                                     **({"weights": centre.record()} if centre is not None else {}),
                                      "distance": "ants only: metres between the torso's (x, y) at the start "
                                                  "and the end of the policy steps; forward: its x component",
                                      "environments": [report.to_dict() for report in reports]})
@@ -150,11 +162,46 @@ def saved_statistics(weight_file: Path) -> SavedStatistics | None:
     return statistics
 
 
-def main_file(kind: str, given: str) -> Path:
-    """The file the script reads first: the one given; in a run folder given as such, its ``last`` file; in a
-    folder of run folders (training's --folder, such as results/paper/carracing_hebbian_seed1), the newest run's
-    (run folders are named by the time they started)."""
+@dataclass(frozen=True)
+class SavedCentre:
+    """A centre read from a run's checkpoint.npz, for a run folder without that centre's files (a campaign keeps
+    only its checkpoint until training is complete, and never the ``best*`` files)."""
+
+    run: Path
+    centre: str  # "last" or "best"
+    theta: np.ndarray
+    statistics: SavedStatistics | None  # --obs_norm: those the centre was evaluated with
+    generation: int | None  # last: the generations done; best: the generation it scored in (None: not found)
+    total: int | None  # the generations config.json asks for
+    score: float | None  # best: its training return (its evaluation mean with --eval_every)
+
+    @property
+    def checkpoint(self) -> Path:
+        return self.run / "checkpoint.npz"
+
+    def describe(self) -> str:
+        if self.centre == "best":
+            where = f" at generation {self.generation}" if self.generation is not None else ""
+            return f"the best centre (training return {self.score:.2f}{where})"
+        if self.total is not None and self.generation < self.total:
+            return (f"the centre at generation {self.generation} of {self.total}: training is not complete, and a "
+                    "campaign keeps only its checkpoint until it is")
+        return f"the final centre (generation {self.generation})"
+
+    def record(self) -> dict:
+        """What ``--json`` says about the weights evaluated."""
+        return {"centre": self.centre, "generation": self.generation, "training_return": self.score}
+
+
+def main_file(kind: str, given: str, centre: str | None = None) -> Path | SavedCentre:
+    """The file the script reads first: the one given; in a run folder given as such, its ``last`` file (or
+    ``centre``'s); in a folder of run folders (training's --folder, such as results/paper/carracing_hebbian_seed1),
+    the newest run's (run folders are named by the time they started). A run folder without that file but with
+    its checkpoint gives the centre saved there."""
     path = Path(given)
+    if centre is not None and not path.is_dir():
+        raise UserError(f"--centre {centre} picks a centre of a run folder, and {given} is not a folder; give the run "
+                        "folder, or leave --centre out")
     if path.is_dir() and not (path / "config.json").is_file():
         runs = sorted(run for run in path.iterdir() if (run / "config.json").is_file())
         if runs:
@@ -162,14 +209,56 @@ def main_file(kind: str, given: str) -> Path:
             say(f"run: {path}" + (f" (the newest of {len(runs)} in {given})" if len(runs) > 1 else ""))
     if not (path / "config.json").is_file():
         return path
-    last = path / named_file("last", KINDS[kind].files[0].roles[0])
-    if not last.exists() and (path / "checkpoint.npz").is_file():  # a campaign's run keeps only its checkpoint
-        done = read_checkpoint(path / "checkpoint.npz").generation
-        total = read_json(path / "config.json").get("run", {}).get("generations", "?")
-        raise UserError(f"{path} has no {last.name}: the run is at generation {done} of {total}, and a campaign "
-                        "keeps only its checkpoint until training is complete; continue it (python experiments/"
-                        "paper.py campaign --budget MINUTES) or evaluate another run")
-    return last
+    chosen = path / named_file(centre or "last", KINDS[kind].files[0].roles[0])
+    if chosen.exists() or not (path / "checkpoint.npz").is_file():
+        return chosen
+    return saved_centre(kind, path, centre or "last")
+
+
+def saved_centre(kind: str, run: Path, centre: str) -> SavedCentre:
+    """``centre`` of the run folder ``run`` from its checkpoint.npz, with the observation statistics it was
+    evaluated with, and where it stands: the generation and, for the best centre, its training return."""
+    checkpoint = read_checkpoint(run / "checkpoint.npz")
+    config = recorded_config(kind, run / "checkpoint.npz")
+    if centre == "best":
+        if not checkpoint.best_theta.size:
+            raise UserError(f"{run}: no centre has scored yet (its checkpoint.npz holds no best centre); evaluate "
+                            "its last centre (--centre last)")
+        theta, statistics = checkpoint.best_theta, checkpoint.best_observations
+        generation, score = scored_in(run, checkpoint.best_center), checkpoint.best_center
+    else:
+        theta, statistics, generation, score = checkpoint.theta, checkpoint.observations, checkpoint.generation, None
+    stat = RunningStat.from_arrays(statistics)
+    saved = None if stat is None else SavedStatistics(stat.mean, stat.std, config.policy.obs_clip, stat.observations)
+    return SavedCentre(run, centre, theta, saved, generation, config.run.generations, score)
+
+
+def centre_of(kind: str, weight_file: Path) -> SavedCentre | None:
+    """Where a run folder's ``last``/``best`` file stands, from the checkpoint beside it (for ``--json``); None
+    for another file, or where there is no checkpoint it can read (the file itself is what is evaluated)."""
+    run, role = weight_file.parent, KINDS[kind].files[0].roles[0]
+    centre = next((centre for centre in CENTRES if weight_file.name == named_file(centre, role)), None)
+    if centre is None or not (run / "checkpoint.npz").is_file() or not (run / "config.json").is_file():
+        return None
+    try:
+        return saved_centre(kind, run, centre)
+    except (*USER_ERRORS, ValueError, OSError):
+        return None
+
+
+def scored_in(run: Path, score: float) -> int | None:
+    """The first generation of the run's metrics.csv whose centre scored ``score`` (its return, or its evaluation
+    mean); None where metrics.csv is missing or holds no such row."""
+    try:
+        rows = read_metrics(run / "metrics.csv")
+    except (OSError, ValueError, *USER_ERRORS):
+        return None
+    for row in rows:
+        for column in ("center_return", "center_eval_mean"):
+            value = row.get(column)
+            if value not in (None, "") and math.isclose(float(value), score, rel_tol=1e-12, abs_tol=1e-12):
+                return int(row["generation"])
+    return None
 
 
 def recorded_config(kind: str, weight_file: Path) -> TrainConfig | None:
@@ -235,6 +324,19 @@ def weight_arrays(args: argparse.Namespace, weight_file: Path, first: np.ndarray
     return {role: first if role == policy.roles[0] else load_dat(path) for role, path in paths.items()}
 
 
+def saved_arrays(args: argparse.Namespace, saved: SavedCentre, policy) -> dict:
+    """role -> array of a centre read from a checkpoint, as the run's files would hold them; the checkpoint holds
+    every part of the centre, so no other file is taken."""
+    given = [flag for flag in path_flags(args) if flag != KINDS[args.kind].files[0].flag]
+    if given:
+        raise UserError(f"{given[0]}: the centre comes from {saved.checkpoint}, which holds all of its weights; leave "
+                        f"{given[0]} out")
+    if saved.theta.size != policy.num_params:
+        raise UserError(f"{saved.checkpoint} holds {saved.theta.size} parameters, and the network its config.json "
+                        f"records has {policy.num_params}")
+    return policy.export(saved.theta)
+
+
 def describe_reservoir(problem, params) -> None:
     """One line for each front end the weights are evaluated with (a reservoir's evolved hyperparameters decoded)."""
     for line in problem.policy.describe_front_ends(params):
@@ -270,23 +372,33 @@ def evaluate_main(kind: str, parser: Parser, argv: list[str] | None = None) -> i
 
     try:
         main_flag = KINDS[kind].files[0].flag
-        weight_file = main_file(kind, getattr(args, main_flag[2:]))
-        check_outputs(args, [str(weight_file), *(path for flag, path in path_flags(args).items() if flag != main_flag)])
+        source = main_file(kind, getattr(args, main_flag[2:]), args.centre)
+        saved = source if isinstance(source, SavedCentre) else None
+        # a saved centre: its checkpoint is read, and the settings and messages name the file it stands for
+        weight_file = saved.run / named_file(saved.centre, KINDS[kind].files[0].roles[0]) if saved else source
+        check_outputs(args, [str(saved.checkpoint if saved else weight_file),
+                             *(path for flag, path in path_flags(args).items() if flag != main_flag)])
         if args.seed + args.episodes - 1 > EPISODE_SEED_RANGE[1]:
             raise UserError(f"--seed {args.seed} with --episodes {args.episodes} runs past the largest episode seed "
                             f"{EPISODE_SEED_RANGE[1]}")
         if args.render and args.video:
             raise UserError("--video records frames off screen; it cannot be combined with --render")
-        first = load_dat(weight_file)
-        with explained("cannot load the observation statistics"):
-            statistics = saved_statistics(weight_file)
+        if saved is not None:
+            say(f"weights: {saved.describe()}, from {saved.checkpoint}")
+            statistics = saved.statistics
+        else:
+            first = load_dat(weight_file)
+            with explained("cannot load the observation statistics"):
+                statistics = saved_statistics(weight_file)
+        centre = saved or (centre_of(kind, weight_file) if args.json else None)  # for the JSON
         config = evaluation_config(kind, args, weight_file, statistics)
         env_ids = resolve_environments(config.env.environment)
         render_mode = "human" if args.render else ("rgb_array" if args.video else None)
         with explained("bad reservoir settings"):
             problem = build_problem(ProblemSpec(env_ids, config.policy), render_mode)
         normalise_observations(problem, weight_file, statistics)
-        arrays = weight_arrays(args, weight_file, first, problem.policy)
+        arrays = saved_arrays(args, saved, problem.policy) if saved else weight_arrays(args, weight_file, first,
+                                                                                        problem.policy)
         with explained("cannot load the weights"):
             params = problem.policy.load(arrays)
         if (weight_file.parent / "config.json").is_file():
@@ -302,7 +414,7 @@ def evaluate_main(kind: str, parser: Parser, argv: list[str] | None = None) -> i
             say(f"video of the first episode: {args.video}")
         say(format_table(reports))
         try:
-            write_outputs(args, [parser.prog, *argv], kind, reports, problem, params)
+            write_outputs(args, [parser.prog, *argv], kind, reports, problem, params, centre)
         except (OSError, ValueError) as error:  # a full disk
             raise UserError(f"{type(error).__name__}: {error}") from None
         return 0

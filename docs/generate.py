@@ -23,7 +23,9 @@ its evaluation.json (of ENVIRONMENT, where it evaluated several), its episodes a
 file and to the run's weights; until the run is evaluated, ``PENDING``. ``<!-- spread:RUN [ENVIRONMENT] -->`` and
 ``<!-- end spread -->`` hold how its returns spread: median, quartiles, lowest and highest, and how many
 episodes fell below the mean by more than a quarter of it. ``<!-- frames:RUN -->`` and
-``<!-- end frames -->`` hold its frames.png the same way. A run evaluated since its page was written is
+``<!-- end frames -->`` hold its frames.png the same way. ``<!-- best:RUN [ENVIRONMENT] -->`` and
+``<!-- end best -->`` hold the evaluation of its best centre (evaluation_best.json): mean ± std, with the
+generation it scored in and its training return. A run evaluated since its page was written is
 reported by ``--check`` as behind, not refused: the figures a page shows are always its files'.
 
 ``python docs/generate.py`` rewrites the tables and figures of every page; ``--check`` rewrites nothing and
@@ -202,31 +204,33 @@ def render_figures(text: str, page: Path, results: Path = records.RESULTS) -> st
 
 
 RUNS = ROOT / "results" / "paper"  # the campaign's run folders
-RESULT = re.compile(r"(?<!`)(<!-- (?P<what>result|spread):(?P<run>[\w.-]+)(?: (?P<environment>[\w.:-]+))? -->)"
+RESULT = re.compile(r"(?<!`)(<!-- (?P<what>result|spread|best):(?P<run>[\w.-]+)(?: (?P<environment>[\w.:-]+))? -->)"
                     r"(?P<text>.*?)(?P<end><!-- end (?P=what) -->)")
 FRAMES = re.compile(r"(?<!`)(<!-- frames:(?P<run>[\w.-]+) -->)(?P<text>.*?)(?P<end><!-- end frames -->)")
 PENDING = "not yet: training in the campaign"
 FRAMES_PENDING = "(the agent's frames, once its run is evaluated)"
 
 
-def evaluated(name: str, runs: Path) -> Path | None:
-    """The newest run folder of ``runs/name`` (the one experiments/paper.py continues), if it has been evaluated."""
+def evaluated(name: str, runs: Path, file: str = campaign.EVALUATION) -> Path | None:
+    """The newest run folder of ``runs/name`` (the one experiments/paper.py continues), if it has been evaluated
+    (its ``file``: the final centre's evaluation, or the best centre's)."""
     run = latest_run(runs / name)
-    return run if run is not None and (run / "evaluation.json").is_file() else None
+    return run if run is not None and (run / file).is_file() else None
 
 
 def link(path: Path, page: Path) -> str:
     return Path(os.path.relpath(path, page.parent)).as_posix()
 
 
-def evaluation_of(name: str, environment: str | None, runs: Path) -> tuple[Path, dict, dict] | None:
-    """The newest run of ``runs/name``, its evaluation.json and the entry of ``environment`` there (the only one,
-    where None); None until the run is evaluated."""
-    run = evaluated(name, runs)
+def evaluation_of(name: str, environment: str | None, runs: Path,
+                  file: str = campaign.EVALUATION) -> tuple[Path, dict, dict] | None:
+    """The newest run of ``runs/name``, its evaluation ``file`` and the entry of ``environment`` there (the only
+    one, where None); None until the run is evaluated."""
+    run = evaluated(name, runs, file)
     if run is None:
         return None
     try:
-        evaluation = read_json(run / "evaluation.json")
+        evaluation = read_json(run / file)
         entries = evaluation["environments"]
         found = ", ".join(entry["environment"] for entry in entries)
     except (KeyError, TypeError, ValueError, OSError, *USER_ERRORS) as error:
@@ -234,7 +238,7 @@ def evaluation_of(name: str, environment: str | None, runs: Path) -> tuple[Path,
     chosen = [entry for entry in entries if environment in (None, entry["environment"])]
     if len(chosen) != 1:
         raise FigureError(f"{name}: {'no' if not chosen else 'several'} environment{'' if environment else 's'} "
-                          f"{environment or ''} in {run / 'evaluation.json'} ({found}); name one in the marker")
+                          f"{environment or ''} in {run / file} ({found}); name one in the marker")
     return run, evaluation, chosen[0]
 
 
@@ -256,6 +260,27 @@ def result(name: str, environment: str | None, page: Path, runs: Path = RUNS) ->
     return (f"**{mean} ± {std}** ([{episodes} episodes {seeds}]({link(run / 'evaluation.json', page)}), generation "
             f"{generation} after {number(hours)} h of training" + (f" on {machines}" if machines else "")
             + f", [weights]({link(run, page)}))")
+
+
+def best(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
+    """One campaign run's best centre evaluated on the final centre's episodes: "**897 ± 61.2** (100 episodes on
+    held-out seeds, the best centre: training return 921.5 at generation 248)"."""
+    found = evaluation_of(name, environment, runs, campaign.BEST_EVALUATION)
+    if found is None:
+        return PENDING
+    run, evaluation, entry = found
+    try:
+        seeds = "on held-out seeds" if evaluation["seed"] >= HELD_OUT_SEED else f"from seed {evaluation['seed']}"
+        centre = evaluation["weights"]
+        scored = f"training return {number(centre['training_return'])}"
+        if centre.get("generation") is not None:
+            scored += f" at generation {centre['generation']}"
+        mean, std, episodes = number(entry["mean"]), number(entry["std"]), entry["episodes"]
+    except (KeyError, TypeError, ValueError) as error:
+        raise FigureError(f"{name}: {run / campaign.BEST_EVALUATION} is not a best centre's evaluation "
+                          f"({type(error).__name__}: {error})") from None
+    return (f"**{mean} ± {std}** ([{episodes} episodes {seeds}]({link(run / campaign.BEST_EVALUATION, page)}), "
+            f"the best centre: {scored})")
 
 
 def spread(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
@@ -293,7 +318,7 @@ def render_results(text: str, page: Path, runs: Path = RUNS, behind: list[str] |
             rendered = pending
         return match[1] + rendered + match["end"]
 
-    writers = {"result": result, "spread": spread}
+    writers = {"result": result, "spread": spread, "best": best}
     text = RESULT.sub(lambda match: rewrite(match, writers[match["what"]](match["run"], match["environment"], page,
                                                                           runs), PENDING), text)
     return FRAMES.sub(lambda match: rewrite(match, frames(match["run"], page, runs), FRAMES_PENDING), text)

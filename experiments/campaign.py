@@ -37,8 +37,10 @@ PACE = 10  # the generations whose mean duration projects the rest of a run
 GRACE = 30.0  # seconds a generation may take to finish after the first SIGINT, before a stop at once
 POLL = 0.5  # seconds between looks at the child and at metrics.csv
 SAFETY = 1.15  # a generation may take this much longer than the last one did
+EVALUATION = "evaluation.json"  # the final centre's evaluation: the run's result
+BEST_EVALUATION = "evaluation_best.json"  # the best centre's (the checkpoint keeps it), beside it
 # what a run folder keeps between chunks: what continuing needs, and what evaluating wrote
-KEPT = ("config.json", "checkpoint.npz", "metrics.csv", "evaluation.json", "adaptation.png", "frames.png")
+KEPT = ("config.json", "checkpoint.npz", "metrics.csv", EVALUATION, BEST_EVALUATION, "adaptation.png", "frames.png")
 FINAL_WEIGHTS = "last*.dat"  # kept once training is complete: the weights evaluated and shipped
 
 
@@ -271,7 +273,7 @@ def measure(run_dir: Path) -> Progress:
     rows = [row for row in rows if int(row["generation"]) <= done]  # a generation recorded but not saved: not done
     last = rows[-PACE:]
     return Progress(
-        done=done, total=config["run"]["generations"], evaluated=(run_dir / "evaluation.json").exists(),
+        done=done, total=config["run"]["generations"], evaluated=(run_dir / EVALUATION).exists(),
         hours=sum(float(row["seconds"]) for row in rows) / 3600, paced=len(last),
         pace=sum(float(row["seconds"]) for row in last) / len(last) if last else None,
         steps=sum(int(row["env_steps"]) for row in last) / len(last) if last else None,

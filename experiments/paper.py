@@ -18,7 +18,9 @@ Runs take hours to days on 2 cores (experiments/README.md). Each experiment has 
 (default results/paper/<experiment>_<kind>_seed<seed>, in the repository: the campaign's runs, which
 are committed as they progress); running the same command again resumes the newest run there from its
 checkpoint (--resume RUN_DIR, --generations being the total), and once training is complete it only
-evaluates. --dry-run prints the commands instead.
+evaluates. The evaluation is the final centre's (evaluation.json, the run's result), then the best
+centre's, the one with the best training return (evaluation_best.json), on the same episodes.
+--dry-run prints the commands instead.
 
 --budget MINUTES trains one chunk (experiments/campaign.py): it stops at a generation boundary before
 the budget is spent, everything saved, and leaves in the run folder only what continuing and evaluating
@@ -185,20 +187,33 @@ def check_training(kind: str, command: list[str]):
     return config
 
 
-def evaluate_command(args: argparse.Namespace, experiment: dict, run_dir: Path) -> list[str]:
+def evaluate_command(args: argparse.Namespace, experiment: dict, run_dir: Path, centre: str = "last") -> list[str]:
     """The final weights (last*.dat) on every body; statistics to JSON, one episode to a PNG, and where the
-    experiment file asks for ``frames``, that episode's every 100th frame to a strip."""
+    experiment file asks for ``frames``, that episode's every 100th frame to a strip. With ``centre`` "best",
+    the best centre (from the run's best*.dat, or its checkpoint once pruned) on the same episodes, statistics
+    only."""
     evaluation = experiment["evaluation"]
     command = [sys.executable, str(ROOT / EVALUATE_SCRIPTS[args.kind]), "--environment", evaluation["environment"],
                "--episodes", str(args.episodes if args.episodes is not None else evaluation["episodes"]),
-               "--seed", str(HELD_OUT_SEED),
-               "--json", str(run_dir / "evaluation.json"), "--plot", str(run_dir / "adaptation.png")]
+               "--seed", str(HELD_OUT_SEED)]
+    main = KINDS[args.kind].files[0]
+    if centre == "best":
+        return command + ["--json", str(run_dir / campaign.BEST_EVALUATION), main.flag, str(run_dir), "--centre",
+                          "best"]
+    command += ["--json", str(run_dir / campaign.EVALUATION), "--plot", str(run_dir / "adaptation.png")]
     if evaluation.get("frames"):
         command += ["--video", str(run_dir / FRAMES)]
     # the run's main file: the evaluate script takes the rule, the network and the files beside it (a CNN,
     # co-evolved initial weights) from the run folder
-    main = KINDS[args.kind].files[0]
     return command + [main.flag, str(run_dir / named_file("last", main.roles[0]))]
+
+
+CENTRES = (("last", campaign.EVALUATION, "the final centre"), ("best", campaign.BEST_EVALUATION, "the best centre"))
+
+
+def evaluated(run_dir: Path) -> bool:
+    """Whether both centres of a run have been evaluated (the queue's test of a run done)."""
+    return all((run_dir / name).exists() for _, name, _ in CENTRES)
 
 
 def run(command: list[str], dry_run: bool) -> int:
@@ -260,7 +275,7 @@ def report(args: argparse.Namespace) -> int:
     groups = []
     for kind in TRAIN_SCRIPTS:
         runs = [run for folder in sorted(args.runs.glob(f"{args.experiment}_{kind}_seed*"))
-                if (run := latest_run(folder)) is not None and (run / "evaluation.json").exists()]
+                if (run := latest_run(folder)) is not None and (run / campaign.EVALUATION).exists()]
         if not runs:
             print(f"paper.py: error: no evaluated {kind} run in {args.runs}/{args.experiment}_{kind}_seed*; run "
                   f"python experiments/paper.py {args.experiment} {kind} --seed N first", file=sys.stderr)
@@ -363,9 +378,13 @@ def experiment_main(args: argparse.Namespace, deadline: float | None) -> int:
         return code
     run_dir = latest_run(ROOT / folder)
     if run_dir is None:  # a dry run before any training
-        say("# then, once the run exists, the evaluation of its last*.dat files")
+        say("# then, once the run exists, the evaluation of its final centre (last*.dat) and its best")
         run_dir = folder / "<run folder>"
-    return run(evaluate_command(args, experiment, run_dir), args.dry_run)
+    for centre, _, _ in CENTRES:
+        code = run(evaluate_command(args, experiment, run_dir, centre), args.dry_run)
+        if code != 0:
+            return code
+    return 0
 
 
 def generations_done(run_dir: Path | None) -> int:
@@ -400,9 +419,11 @@ def run_campaign(args: argparse.Namespace, experiment: dict, command: list[str],
                 return 130 if chunk is not None and chunk.signals else 1
             done = generations_done(run_dir)
             interrupted = chunk is not None and chunk.signals > 0
-            if done >= total and not (run_dir / "evaluation.json").exists() and not interrupted:
-                evaluation = evaluate_command(args, experiment, run_dir)
-                say(f"campaign: training complete; evaluating: $ {shlex.join(evaluation)}")
+            for centre, name, what in CENTRES:
+                if done < total or (run_dir / name).exists() or interrupted:
+                    continue
+                evaluation = evaluate_command(args, experiment, run_dir, centre)
+                say(f"campaign: training complete; evaluating {what}: $ {shlex.join(evaluation)}")
                 chunk = campaign.Chunk(evaluation, deadline, lambda: None, ROOT, say)
                 code = chunk.run()
                 interrupted = interrupted or chunk.signals > 0
@@ -413,11 +434,11 @@ def run_campaign(args: argparse.Namespace, experiment: dict, command: list[str],
     except campaign.CampaignError as error:
         print(f"paper.py: error: {error}", file=sys.stderr)
         return 2
-    evaluated = (run_dir / "evaluation.json").exists()
-    state = "complete and evaluated" if evaluated else "complete, not yet evaluated" if done >= total else "saved"
+    state = ("complete and evaluated" if evaluated(run_dir) else "complete, not yet evaluated" if done >= total
+             else "saved")
     say(f"campaign: {shown(run_dir)}: generation {done} "
         f"of {total}, {state}")
-    if not evaluated:
+    if not evaluated(run_dir):
         say(f"continue with: python experiments/paper.py {continue_words(args)} --budget MINUTES "
             "(or the whole campaign: python experiments/paper.py campaign --budget MINUTES)")
     return 130 if interrupted else 0
@@ -541,7 +562,7 @@ def run_queue(args: argparse.Namespace) -> int:
     deadline = time.monotonic() + 60 * args.budget
     for entry in campaign_entries(args.threads):
         run_dir = latest_run(entry_folder(entry))
-        if run_dir is not None and (run_dir / "evaluation.json").exists():
+        if run_dir is not None and evaluated(run_dir):
             continue
         if deadline - time.monotonic() < 60:
             say("campaign: less than a minute of the budget left; stopping before the next run")
@@ -549,7 +570,7 @@ def run_queue(args: argparse.Namespace) -> int:
         say(f"campaign: next run: {entry.experiment} {entry.kind} seed {entry.seed if entry.seed is not None else 1}")
         code = experiment_main(entry, deadline)
         latest = latest_run(entry_folder(entry))
-        if code != 0 or latest is None or not (latest / "evaluation.json").exists():
+        if code != 0 or latest is None or not evaluated(latest):
             return code
     say(f"campaign: every run of {shown(CAMPAIGN)} is complete and evaluated")
     return 0

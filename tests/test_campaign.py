@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import json
 import os
 import shutil
 import signal
@@ -114,8 +115,8 @@ def test_a_chunk_committed_and_continued_in_a_clone_is_the_uninterrupted_run(tmp
     assert continued.returncode == 0, continued.stdout[-2000:] + continued.stderr[-2000:]
     assert f"resuming {clone / relative} at generation {done} of {total}" in continued.stdout
     assert numbers(clone / relative) == numbers(run_of(tmp_path / "whole"))
-    finished = {*KEPT_WHILE_RUNNING, "evaluation.json", "adaptation.png", "frames.png", "last_coeffs.dat",
-                "last_CNN_parameters.dat"}
+    finished = {*KEPT_WHILE_RUNNING, "evaluation.json", "evaluation_best.json", "adaptation.png", "frames.png",
+                "last_coeffs.dat", "last_CNN_parameters.dat"}
     assert {path.name for path in (clone / relative).iterdir()} == finished
     assert (clone / relative / "frames.png").read_bytes() == (run_of(tmp_path / "whole") / "frames.png").read_bytes()
     git("add", "-A", cwd=clone)  # the finished run is committed whole: the weights, the evaluation, its pictures
@@ -192,15 +193,15 @@ def test_a_stale_pid_file_is_taken_over(tmp_path):
 
 
 def test_prune_keeps_what_continuing_and_evaluating_need(tmp_path):
-    names = ["config.json", "checkpoint.npz", "metrics.csv", "evaluation.json", "adaptation.png", "frames.png",
-             "last_coeffs.dat",
+    names = ["config.json", "checkpoint.npz", "metrics.csv", "evaluation.json", "evaluation_best.json",
+             "adaptation.png", "frames.png", "last_coeffs.dat",
              "last_CNN_parameters.dat", "best_coeffs.dat", "HEBcoeffs__CarRacing-v0__rew_5__coeffs__3.dat", ".lock",
              "fitness.png", "Fitness_values_run_CarRacing-v0.npy"]
     for name in names:
         (tmp_path / name).write_text("x")
     removed = prune(tmp_path, complete=False)
-    assert sorted(path.name for path in tmp_path.iterdir()) == sorted(names[:6])
-    assert set(removed) == set(names[6:])
+    assert sorted(path.name for path in tmp_path.iterdir()) == sorted(names[:7])
+    assert set(removed) == set(names[7:])
     (tmp_path / "last.dat").write_text("x")
     (tmp_path / "best.dat").write_text("x")
     assert prune(tmp_path, complete=True) == ["best.dat"]
@@ -225,9 +226,20 @@ def test_the_campaign_runs_its_entries_in_order_until_each_is_evaluated(tmp_path
     for kind in ("hebbian", "static"):
         run = run_of(tmp_path / "results" / f"carracing_{kind}_seed1")
         assert (run / "evaluation.json").exists() and read_checkpoint(run / "checkpoint.npz").generation == 2
+        best = json.loads((run / "evaluation_best.json").read_text())  # from the checkpoint: best* are pruned
+        assert best["weights"]["centre"] == "best" and best["seed"] == 2**31 and not list(run.glob("best*"))
     assert "every run of" in output and not (tmp_path / "results" / "campaign.pid").exists()
     assert paper_script.main(["campaign", "--budget", "10"]) == 0
     assert "next run" not in capsys.readouterr().out
+    # a run evaluated before the best centre was (evaluation.json alone): the queue evaluates its best, and only that
+    run = run_of(tmp_path / "results" / "carracing_static_seed1")
+    (run / "evaluation_best.json").unlink()
+    final = (run / "evaluation.json").read_bytes()
+    assert paper_script.main(["campaign", "--budget", "10"]) == 0
+    output = capsys.readouterr().out
+    assert "next run: carracing static" in output and "evaluating the best centre" in output
+    assert "evaluating the final centre" not in output and "training, for" not in output
+    assert (run / "evaluation.json").read_bytes() == final and (run / "evaluation_best.json").exists()
 
 
 def test_the_campaign_takes_only_its_budget_and_threads():

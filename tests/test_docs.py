@@ -672,6 +672,19 @@ def test_a_campaign_result_is_rendered_from_its_evaluation(evaluated_runs):
               f"{below} of 2 episodes below three quarters of the mean ({generate.number(floor)})")
     marker = "<!-- spread:carracing_hebbian_seed1 CarRacing-v3 -->{}<!-- end spread -->"
     assert generate.render_results(marker.format("old"), page, evaluated_runs) == marker.format(spread)
+    # the best centre: the first generation of metrics.csv with the highest centre return, evaluated on the same seeds
+    with open(run / "metrics.csv", newline="") as handle:
+        top = max(csv.DictReader(handle), key=lambda row: float(row["center_return"]))
+    best = json.loads((run / "evaluation_best.json").read_text())
+    assert best["weights"] == {"centre": "best", "generation": int(top["generation"]),
+                               "training_return": float(top["center_return"])}
+    (best_entry,) = best["environments"]
+    assert best_entry["seeds"] == entry["seeds"]
+    best_cell = (f"**{generate.number(best_entry['mean'])} ± {generate.number(best_entry['std'])}** ([2 episodes on "
+                 f"held-out seeds]({os.path.relpath(run / 'evaluation_best.json', page.parent)}), the best centre: "
+                 f"training return {generate.number(float(top['center_return']))} at generation {top['generation']})")
+    marker = "<!-- best:carracing_hebbian_seed1 CarRacing-v3 -->{}<!-- end best -->"
+    assert generate.render_results(marker.format("old"), page, evaluated_runs) == marker.format(best_cell)
     strip = generate.render_results("<!-- frames:carracing_hebbian_seed1 --><!-- end frames -->", page, evaluated_runs)
     assert f"]({os.path.relpath(run / 'frames.png', page.parent)})<!-- end frames -->" in strip
     with pytest.raises(generate.FigureError, match=r"no environment CarRacing-v2 in .* \(CarRacing-v3\)"):
@@ -686,6 +699,8 @@ def test_a_campaign_result_not_yet_evaluated_is_pending_and_a_late_page_is_behin
                                    evaluated_runs) == pending  # no such run
     assert generate.render_results("<!-- spread:carracing_static_seed1 -->x<!-- end spread -->", page,
                                    evaluated_runs) == pending.replace("result", "spread")
+    assert generate.render_results("<!-- best:carracing_static_seed1 -->x<!-- end best -->", page,
+                                   evaluated_runs) == pending.replace("result", "best")
     shutil.copytree(evaluated_runs / "carracing_hebbian_seed1", tmp_path / "carracing_hebbian_seed1")
     (run,) = [path for path in (tmp_path / "carracing_hebbian_seed1").iterdir() if path.is_dir()]
     (run / "evaluation.json").rename(run / "later.json")  # trained, not yet evaluated

@@ -10,8 +10,10 @@
 - unwritable output paths are refused before any episode runs: one line, exit code 2.
 """
 
+import csv
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -213,19 +215,79 @@ def test_a_folder_of_runs_evaluates_its_newest_run(tmp_path):
     assert by_folder.stdout.splitlines()[-1] == by_run.stdout.splitlines()[-1]
 
 
-def test_a_campaign_run_still_training_is_refused_in_one_line(tmp_path):
-    """A campaign keeps only config.json, checkpoint.npz and metrics.csv until training is complete: evaluating
-    such a run says so, with how far it got and how to continue it."""
+def trained_and_pruned(tmp_path: Path, generations: int) -> tuple[Path, Path]:
+    """A small run folder as training leaves it, and beside it a copy that keeps what a campaign keeps while it
+    trains: config.json, checkpoint.npz and metrics.csv."""
+    done = run_script("train_static.py", "--environment", "CartPole-v1", "--popsize", "4", "--generations",
+                      str(generations), "--threads", "1", "--seed", "1", "--folder", str(tmp_path / "runs"))
+    assert done.returncode == 0, done.stderr
+    (run,) = [path for path in (tmp_path / "runs").iterdir() if path.is_dir()]
+    kept = tmp_path / "kept"
+    kept.mkdir()
+    for name in ("config.json", "checkpoint.npz", "metrics.csv"):
+        shutil.copy(run / name, kept / name)
+    return run, kept
+
+
+def test_a_run_folder_keeping_only_its_checkpoint_evaluates_the_centres_saved_there(tmp_path):
+    """A campaign keeps only config.json, checkpoint.npz and metrics.csv until training is complete, and never
+    best*: ``--centre last`` (the default) and ``--centre best`` read the centre from the checkpoint, and give
+    the numbers of the run's own last.dat and best.dat; the JSON says which centre, where it scored, and how."""
+    run, kept = trained_and_pruned(tmp_path, generations=3)
+    with open(run / "metrics.csv", newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    best_row = max(rows, key=lambda row: float(row["center_return"]))  # the first of the highest: best follows ">"
+    for centre, file in (("last", "last.dat"), ("best", "best.dat")):
+        by_file = run_script("evaluate_static.py", "--path_weights", str(run / file), "--episodes", "3",
+                             "--json", str(tmp_path / f"{centre}_file.json"))
+        by_checkpoint = run_script("evaluate_static.py", "--path_weights", str(kept), "--centre", centre,
+                                   "--episodes", "3", "--json", str(tmp_path / f"{centre}.json"))
+        assert by_file.returncode == 0 and by_checkpoint.returncode == 0, by_file.stderr + by_checkpoint.stderr
+        from_file, from_checkpoint = (json.loads((tmp_path / f"{name}.json").read_text())
+                                      for name in (f"{centre}_file", centre))
+        assert from_checkpoint["environments"] == from_file["environments"]
+        assert from_checkpoint["weights"] == from_file["weights"]  # the checkpoint beside best.dat says the same
+        expected = ({"centre": "last", "generation": 3, "training_return": None} if centre == "last" else
+                    {"centre": "best", "generation": int(best_row["generation"]),
+                     "training_return": float(best_row["center_return"])})
+        assert from_checkpoint["weights"] == expected
+        line = ("the final centre (generation 3)" if centre == "last" else
+                f"the best centre (training return {float(best_row['center_return']):.2f} at generation "
+                f"{best_row['generation']})")
+        assert f"weights: {line}, from {kept / 'checkpoint.npz'}" in by_checkpoint.stdout
+
+
+def test_a_run_still_training_evaluates_its_centre_so_far_and_says_so(tmp_path):
     done = run_script("train_static.py", "--environment", "CartPole-v1", "--popsize", "4", "--generations", "2",
                       "--threads", "1", "--seed", "1", "--folder", str(tmp_path))
     assert done.returncode == 0, done.stderr
     (run,) = [path for path in tmp_path.iterdir() if path.is_dir()]
+    config = json.loads((run / "config.json").read_text())
+    config["run"]["generations"] = 300  # as a campaign's run at generation 2 of 300
+    (run / "config.json").write_text(json.dumps(config))
     for path in run.iterdir():
         if path.name not in ("config.json", "checkpoint.npz", "metrics.csv"):
             path.unlink()
-    refused = run_script("evaluate_static.py", "--path_weights", str(run))
-    assert refused.returncode == 2
-    assert refused.stderr.splitlines() == [
-        f"evaluate_static.py: error: {run} has no last.dat: the run is at generation 2 of 2, and a campaign keeps "
-        "only its checkpoint until training is complete; continue it (python experiments/paper.py campaign "
-        "--budget MINUTES) or evaluate another run"]
+    result = run_script("evaluate_static.py", "--path_weights", str(run))
+    assert result.returncode == 0, result.stderr
+    assert (f"weights: the centre at generation 2 of 300: training is not complete, and a campaign keeps only its "
+            f"checkpoint until it is, from {run / 'checkpoint.npz'}") in result.stdout
+
+
+@pytest.mark.parametrize("args, message", [
+    (("{run}/best.dat", "--centre", "best"), "--centre best picks a centre of a run folder, and {run}/best.dat is "
+                                              "not a folder; give the run folder, or leave --centre out"),
+    (("{kept}", "--path_reservoir", "{run}/best.dat"), "--path_reservoir: the centre comes from {kept}/checkpoint.npz, "
+                                                        "which holds all of its weights; leave --path_reservoir out"),
+    (("{kept}", "--centre", "worst"), None),
+])
+def test_a_centre_that_cannot_be_evaluated_is_one_line_and_exit_2(tmp_path, args, message):
+    run, kept = trained_and_pruned(tmp_path, generations=1)
+    path, *rest = (arg.format(run=run, kept=kept) for arg in args)
+    refused = run_script("evaluate_static.py", "--path_weights", path, *rest)
+    assert refused.returncode == 2 and "Traceback" not in refused.stderr
+    last = refused.stderr.strip().splitlines()[-1]
+    if message is None:  # argparse's own: the choices named
+        assert "--centre: invalid choice: 'worst' (choose from" in last
+    else:
+        assert last == f"evaluate_static.py: error: {message.format(run=run, kept=kept)}"
