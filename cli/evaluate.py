@@ -80,7 +80,8 @@ def evaluation_parser(prog: str, description: str, kind: str) -> Parser:
              f".png: a strip of every {STRIP_EVERY}th frame")
     add("--json", default=None, metavar="PATH",
         help="also write the statistics (per environment: returns, mean, std, steps, seeds; for ants "
-             "the distances and forward displacements walked) to this JSON file")
+             "the distances and forward displacements walked; for a run folder's centre, which one, the generation "
+             "and its training return) to this JSON file")
     add("--plot", default=None, metavar="PATH",
         help=f"a figure ({', '.join(FIGURE_SUFFIXES)}) of one episode (first environment, first seed): the return "
              "so far, or for ants the distance walked, and for Hebbian networks the norm of each layer's weights over "
