@@ -162,3 +162,26 @@ def test_envs_of_different_sizes_are_one_line_and_exit_2(tmp_path, capsys):
     assert len(error.splitlines()) == 1
     assert "CartPole-v1" in error and "share observation and action sizes" in error
     assert not (tmp_path / "runs").exists()
+
+
+@pytest.mark.parametrize("env_id", ["AntBulletEnv-v0", "AntAsymRightBulletEnv-v0", "AntAsymLeftBulletEnv-v0"])
+def test_a_resting_bullet_ant_lies_below_the_alive_height_and_its_episode_ends_at_step_202(env_id):
+    """Why the campaign's ant episodes all end near step 242 (experiments/README.md, "The ant, static, seed 1"):
+    with its motors at rest the ant settles on its torso, below the 0.26 m under which pyBullet ends the episode,
+    within 20 steps; the original's loop ignores that end for the first 201 policy steps and stops at the next
+    check, so a network that does not lift the torso gets 40 burn-in steps and 202 policy steps."""
+    env = gym.make(env_id)
+    try:
+        env.reset(seed=3)
+        robot = env.unwrapped.robot
+        ended = [env.step(np.zeros(8, dtype=np.float32))[2] for _ in range(20)]
+        assert ended[-1] and robot.body_real_xyz[2] < 0.26
+    finally:
+        env.close()
+    problem = ProblemSpec((env_id,), PolicySettings("static")).build()
+    try:
+        still = np.zeros(problem.policy.num_params, dtype=np.float32)  # tanh(0): every action 0, the motors at rest
+        episode = envs.rollout(problem.envs[0], problem.policy, still, seed=3)
+    finally:
+        problem.close()
+    assert episode.steps == recipes.PYBULLET_ANT.burn_in + 202
