@@ -39,7 +39,7 @@ from es.interrupts import honour_sigint
 from es.observations import RunningStat, SavedStatistics, load_statistics, statistics_path
 from es.outputs import JSON_SUFFIXES
 from es.outputs import check_outputs as check_paths
-from es.runfolder import named_file, read_checkpoint
+from es.runfolder import RunFolderError, named_file, read_checkpoint
 from policies import KINDS
 from report.plots import FIGURE_SUFFIXES
 from report.video import STRIP_EVERY, VIDEO_SUFFIXES
@@ -168,7 +168,7 @@ class SavedCentre:
     """A centre read from a run's checkpoint.npz, for a run folder without that centre's files (a campaign keeps
     only its checkpoint until training is complete, and never the ``best*`` files)."""
 
-    run: Path
+    file: Path  # the run's file of that centre, absent: last.dat, best_coeffs.dat, ...
     centre: str  # "last" or "best"
     theta: np.ndarray
     statistics: SavedStatistics | None  # --obs_norm: those the centre was evaluated with
@@ -178,7 +178,7 @@ class SavedCentre:
 
     @property
     def checkpoint(self) -> Path:
-        return self.run / "checkpoint.npz"
+        return self.file.parent / "checkpoint.npz"
 
     def describe(self) -> str:
         if self.centre == "best":
@@ -213,25 +213,32 @@ def main_file(kind: str, given: str, centre: str | None = None) -> Path | SavedC
     chosen = path / named_file(centre or "last", KINDS[kind].files[0].roles[0])
     if chosen.exists() or not (path / "checkpoint.npz").is_file():
         return chosen
-    return saved_centre(kind, path, centre or "last")
+    return saved_centre(kind, chosen, centre or "last")
 
 
-def saved_centre(kind: str, run: Path, centre: str) -> SavedCentre:
-    """``centre`` of the run folder ``run`` from its checkpoint.npz, with the observation statistics it was
-    evaluated with, and where it stands: the generation and, for the best centre, its training return."""
-    checkpoint = read_checkpoint(run / "checkpoint.npz")
-    config = recorded_config(kind, run / "checkpoint.npz")
+def saved_centre(kind: str, file: Path, centre: str) -> SavedCentre:
+    """``centre`` of the run folder ``file`` lies in (``file``: that centre's main file, present or not), from its
+    checkpoint.npz, with the observation statistics it was evaluated with, and where it stands: the generation and,
+    for the best centre, its training return."""
+    run = file.parent
+    try:
+        checkpoint = read_checkpoint(run / "checkpoint.npz")
+    except RunFolderError:
+        raise UserError(f"cannot evaluate {run}: {run / 'checkpoint.npz'} is not a readable checkpoint; evaluate a "
+                        "weight file of the run instead") from None
+    config = recorded_config(kind, file)
     if centre == "best":
         if not checkpoint.best_theta.size:
             raise UserError(f"{run}: no centre has scored yet (its checkpoint.npz holds no best centre); evaluate "
                             "its last centre (--centre last)")
         theta, statistics = checkpoint.best_theta, checkpoint.best_observations
-        generation, score = scored_in(run, checkpoint.best_center), checkpoint.best_center
+        column = "center_eval_mean" if config.es.eval_every is not None else "center_return"  # what picked it
+        generation, score = scored_in(run, column, checkpoint.best_center), checkpoint.best_center
     else:
         theta, statistics, generation, score = checkpoint.theta, checkpoint.observations, checkpoint.generation, None
     stat = RunningStat.from_arrays(statistics)
     saved = None if stat is None else SavedStatistics(stat.mean, stat.std, config.policy.obs_clip, stat.observations)
-    return SavedCentre(run, centre, theta, saved, generation, config.run.generations, score)
+    return SavedCentre(file, centre, theta, saved, generation, config.run.generations, score)
 
 
 def centre_of(kind: str, weight_file: Path) -> SavedCentre | None:
@@ -242,24 +249,20 @@ def centre_of(kind: str, weight_file: Path) -> SavedCentre | None:
     if centre is None or not (run / "checkpoint.npz").is_file() or not (run / "config.json").is_file():
         return None
     try:
-        return saved_centre(kind, run, centre)
+        return saved_centre(kind, weight_file, centre)
     except (*USER_ERRORS, ValueError, OSError):
         return None
 
 
-def scored_in(run: Path, score: float) -> int | None:
-    """The first generation of the run's metrics.csv whose centre scored ``score`` (its return, or its evaluation
-    mean); None where metrics.csv is missing or holds no such row."""
+def scored_in(run: Path, column: str, score: float) -> int | None:
+    """The first generation of the run's metrics.csv whose ``column`` (the centre's return, or its evaluation mean)
+    is ``score``; None where metrics.csv is missing or holds no such row."""
     try:
         rows = read_metrics(run / "metrics.csv")
-    except (OSError, ValueError, *USER_ERRORS):
+        return next((int(row["generation"]) for row in rows if row.get(column) not in (None, "")
+                     and math.isclose(float(row[column]), score, rel_tol=1e-12, abs_tol=1e-12)), None)
+    except (OSError, ValueError, KeyError, *USER_ERRORS):
         return None
-    for row in rows:
-        for column in ("center_return", "center_eval_mean"):
-            value = row.get(column)
-            if value not in (None, "") and math.isclose(float(value), score, rel_tol=1e-12, abs_tol=1e-12):
-                return int(row["generation"])
-    return None
 
 
 def recorded_config(kind: str, weight_file: Path) -> TrainConfig | None:
@@ -376,7 +379,7 @@ def evaluate_main(kind: str, parser: Parser, argv: list[str] | None = None) -> i
         source = main_file(kind, getattr(args, main_flag[2:]), args.centre)
         saved = source if isinstance(source, SavedCentre) else None
         # a saved centre: its checkpoint is read, and the settings and messages name the file it stands for
-        weight_file = saved.run / named_file(saved.centre, KINDS[kind].files[0].roles[0]) if saved else source
+        weight_file = saved.file if saved else source
         check_outputs(args, [str(saved.checkpoint if saved else weight_file),
                              *(path for flag, path in path_flags(args).items() if flag != main_flag)])
         if args.seed + args.episodes - 1 > EPISODE_SEED_RANGE[1]:

@@ -242,6 +242,14 @@ def evaluation_of(name: str, environment: str | None, runs: Path,
     return run, evaluation, chosen[0]
 
 
+def scored(run: Path, file: str, evaluation: dict, entry: dict, page: Path) -> str:
+    """"**903 ± 45.1** ([100 episodes on held-out seeds](link)": one environment's returns in an evaluation
+    ``file`` of ``run``, linked; a KeyError or TypeError where the file is not one."""
+    seeds = "on held-out seeds" if evaluation["seed"] >= HELD_OUT_SEED else f"from seed {evaluation['seed']}"
+    return (f"**{number(entry['mean'])} ± {number(entry['std'])}** ([{entry['episodes']} episodes {seeds}]"
+            f"({link(run / file, page)})")
+
+
 def result(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
     """One campaign run's evaluation: "**903 ± 45.1** (100 episodes on held-out seeds, generation 300 after 7.31 h
     of training on AMD EPYC 7B13, 2 workers, weights)"; the hours are the sum of metrics.csv's ``seconds``, the
@@ -251,15 +259,12 @@ def result(name: str, environment: str | None, page: Path, runs: Path = RUNS) ->
         return PENDING
     run, evaluation, entry = found
     try:
-        seeds = "on held-out seeds" if evaluation["seed"] >= HELD_OUT_SEED else f"from seed {evaluation['seed']}"
+        headline = scored(run, campaign.EVALUATION, evaluation, entry, page)
         progress = campaign.measure(run)
-        generation, hours, machines = progress.done, progress.hours, progress.machines
-        mean, std, episodes = number(entry["mean"]), number(entry["std"]), entry["episodes"]
     except (KeyError, TypeError, ValueError, OSError, *USER_ERRORS) as error:
         raise FigureError(f"{name}: {run} is not a run this tool evaluated ({type(error).__name__}: {error})") from None
-    return (f"**{mean} ± {std}** ([{episodes} episodes {seeds}]({link(run / 'evaluation.json', page)}), generation "
-            f"{generation} after {number(hours)} h of training" + (f" on {machines}" if machines else "")
-            + f", [weights]({link(run, page)}))")
+    return (f"{headline}, generation {progress.done} after {number(progress.hours)} h of training"
+            + (f" on {progress.machines}" if progress.machines else "") + f", [weights]({link(run, page)}))")
 
 
 def best(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
@@ -270,17 +275,13 @@ def best(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> s
         return PENDING
     run, evaluation, entry = found
     try:
-        seeds = "on held-out seeds" if evaluation["seed"] >= HELD_OUT_SEED else f"from seed {evaluation['seed']}"
+        headline = scored(run, campaign.BEST_EVALUATION, evaluation, entry, page)
         centre = evaluation["weights"]
-        scored = f"training return {number(centre['training_return'])}"
-        if centre.get("generation") is not None:
-            scored += f" at generation {centre['generation']}"
-        mean, std, episodes = number(entry["mean"]), number(entry["std"]), entry["episodes"]
+        where = f" at generation {centre['generation']}" if centre.get("generation") is not None else ""
+        return f"{headline}, the best centre: training return {number(centre['training_return'])}{where})"
     except (KeyError, TypeError, ValueError) as error:
         raise FigureError(f"{name}: {run / campaign.BEST_EVALUATION} is not a best centre's evaluation "
                           f"({type(error).__name__}: {error})") from None
-    return (f"**{mean} ± {std}** ([{episodes} episodes {seeds}]({link(run / campaign.BEST_EVALUATION, page)}), "
-            f"the best centre: {scored})")
 
 
 def spread(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:

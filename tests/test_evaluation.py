@@ -291,3 +291,16 @@ def test_a_centre_that_cannot_be_evaluated_is_one_line_and_exit_2(tmp_path, args
         assert "--centre: invalid choice: 'worst' (choose from" in last
     else:
         assert last == f"evaluate_static.py: error: {message.format(run=run, kept=kept)}"
+
+
+def test_an_unreadable_checkpoint_is_named_in_one_line_and_exit_2(tmp_path):
+    """A run folder that keeps only its checkpoint, and the checkpoint is damaged: the evaluation says which file,
+    in its own words (not a resume's), and runs no episode."""
+    _, kept = trained_and_pruned(tmp_path, generations=1)
+    (kept / "checkpoint.npz").write_bytes(b"not a checkpoint")
+    for centre in ("last", "best"):
+        refused = run_script("evaluate_static.py", "--path_weights", str(kept), "--centre", centre)
+        assert refused.returncode == 2 and "Traceback" not in refused.stderr
+        assert refused.stderr.strip().splitlines() == [
+            f"evaluate_static.py: error: cannot evaluate {kept}: {kept / 'checkpoint.npz'} is not a readable "
+            "checkpoint; evaluate a weight file of the run instead"]
