@@ -27,9 +27,11 @@ def build_parser() -> Parser:
     parser.add_argument("--group", action="append", default=[], metavar="NAME=PATHS", required=True,
                         help="a configuration's run folders (given once per group)")
     parser.add_argument("--score", choices=list(stats.SCORES), default="final",
-                        help="final: the last centre's return; best: the best centre's; evaluation: evaluation.json")
+                        help="final: the last centre's return; best: the best centre's; "
+                             + "; ".join(f"{score}: {name}" for score, name in stats.EVALUATIONS.items()))
     parser.add_argument("--environment", default=None, metavar="ID",
-                        help="with --score evaluation: the environment of evaluation.json to score (default: all)")
+                        help=f"with --score {' or '.join(stats.EVALUATIONS)}: the environment of the evaluation file "
+                             "to score (default: all)")
     parser.add_argument("--out", type=Path, default=Path("runs/report"), metavar="DIR", help="where the files go")
     parser.add_argument("--reps", type=positive_int, default=stats.DEFAULT_REPS, help="bootstrap replications")
     parser.add_argument("--seed", type=int, default=0, help="seed of the bootstrap")

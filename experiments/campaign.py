@@ -30,6 +30,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from report.stats import EVALUATIONS
+
 PID_FILE = "campaign.pid"  # beside the experiments' folders: results/paper/campaign.pid
 STOPPED = (130, -signal.SIGINT)  # a child that stopped at a SIGINT, its last saved generation intact
 PROGRESS = "progress.md"  # beside them too: how far each run of the campaign got, written at every chunk's end
@@ -37,8 +39,8 @@ PACE = 10  # the generations whose mean duration projects the rest of a run
 GRACE = 30.0  # seconds a generation may take to finish after the first SIGINT, before a stop at once
 POLL = 0.5  # seconds between looks at the child and at metrics.csv
 SAFETY = 1.15  # a generation may take this much longer than the last one did
-EVALUATION = "evaluation.json"  # the final centre's evaluation: the run's result
-BEST_EVALUATION = "evaluation_best.json"  # the best centre's (the checkpoint keeps it), beside it
+EVALUATION = EVALUATIONS["evaluation"]  # the final centre's evaluation: the run's result
+BEST_EVALUATION = EVALUATIONS["evaluation_best"]  # the best centre's (the checkpoint keeps it), beside it
 # what a run folder keeps between chunks: what continuing needs, and what evaluating wrote
 KEPT = ("config.json", "checkpoint.npz", "metrics.csv", EVALUATION, BEST_EVALUATION, "adaptation.png", "frames.png")
 FINAL_WEIGHTS = "last*.dat"  # kept once training is complete: the weights evaluated and shipped

@@ -36,7 +36,9 @@ and checks (``check_training``); a folder whose run has other settings than the 
 runs/<experiment>_<kind>_seed<seed>, or under --runs) with rliable's statistics (report/stats.py:
 IQM and mean with 95 % bootstrap intervals, performance profiles, probability of improvement), scored
 by each run's evaluation.json, one report per evaluation environment (the ant: two seen bodies and
-the unseen one), in runs/<experiment>_report/<environment>/. It needs pip install -r requirements-stats.txt.
+the unseen one), in runs/<experiment>_report/<environment>/. ``report --centre best`` scores each run
+by its best centre's evaluation (evaluation_best.json) instead, in runs/<experiment>_report_best/.
+It needs pip install -r requirements-stats.txt.
 """
 
 from __future__ import annotations
@@ -93,6 +95,9 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
                         help=f"with report: the folder holding the <experiment>_<kind>_seed<seed> folders (default: "
                              f"{RESULTS})")
     parser.add_argument("--reps", type=positive_int, default=DEFAULT_REPS, help="with report: bootstrap replications")
+    parser.add_argument("--centre", choices=[centre for centre, _, _ in CENTRES], default=None,
+                        help="with report: score each run by the evaluation of its last centre (the default: "
+                             f"{campaign.EVALUATION}, the run's result) or of its best ({campaign.BEST_EVALUATION})")
     parser.add_argument("--reproduce", type=positive_int, default=None, metavar="N",
                         help="train the experiment's command again for N generations, in a temporary folder, and "
                              "compare them with its run's metrics.csv row by row (every column but the timings): "
@@ -117,6 +122,9 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
                      "--reproduce 10")
     elif args.kind is None:
         parser.error(f"{args.experiment} needs a kind: static, hebbian or report")
+    elif args.centre is not None and args.kind != "report":
+        parser.error(f"--centre goes with report: python experiments/paper.py {args.experiment} report --centre "
+                     f"{args.centre}")
     return args
 
 
@@ -261,7 +269,8 @@ def training_curves(args: argparse.Namespace) -> int:
 
 
 def report(args: argparse.Namespace) -> int:
-    """Static against Hebbian: each seed's newest run, scored by its evaluation.json, per evaluation environment."""
+    """Static against Hebbian: each seed's newest run, scored by the evaluation of its last or best centre
+    (``--centre``), per evaluation environment."""
     from report import stats
 
     if not stats.available():
@@ -272,19 +281,22 @@ def report(args: argparse.Namespace) -> int:
         named = tomllib.load(handle)["evaluation"]["environment"].split(",")
     # as evaluation.json names them: the ids they resolve to (CarRacing-v0 -> CarRacing-v3)
     environments = [envs.resolve_env_id(env_id, notify=lambda *_: None) for env_id in named]
+    centre = args.centre or "last"
+    file = dict((name, file) for name, file, _ in CENTRES)[centre]
+    score = next(score for score, name in stats.EVALUATIONS.items() if name == file)
     groups = []
     for kind in TRAIN_SCRIPTS:
         runs = [run for folder in sorted(args.runs.glob(f"{args.experiment}_{kind}_seed*"))
-                if (run := latest_run(folder)) is not None and (run / campaign.EVALUATION).exists()]
+                if (run := latest_run(folder)) is not None and (run / file).exists()]
         if not runs:
-            print(f"paper.py: error: no evaluated {kind} run in {args.runs}/{args.experiment}_{kind}_seed*; run "
+            print(f"paper.py: error: no {kind} run in {args.runs}/{args.experiment}_{kind}_seed* has {file}; run "
                   f"python experiments/paper.py {args.experiment} {kind} --seed N first", file=sys.stderr)
             return 2
         groups.append(f"{kind}={','.join(map(str, runs))}")
     for environment in environments:
-        out = args.runs / f"{args.experiment}_report" / environment
+        out = args.runs / (f"{args.experiment}_report" + ("" if centre == "last" else f"_{centre}")) / environment
         try:
-            result = stats.report(groups, out, "evaluation", environment, reps=args.reps)
+            result = stats.report(groups, out, score, environment, reps=args.reps)
         except stats.StatsError as error:
             print(f"paper.py: error: {error}", file=sys.stderr)
             return 2

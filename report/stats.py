@@ -21,7 +21,9 @@ The score of a run (``--score``):
   (one episode on a training seed);
 - ``best``: the best such value over all generations (optimistic: a maximum over noisy values);
 - ``evaluation``: the mean return in the run's ``evaluation.json`` (``evaluate_*.py --json``, as
-  ``experiments/paper.py`` writes it); ``--environment`` picks one environment of several.
+  ``experiments/paper.py`` writes it: its final centre's); ``--environment`` picks one environment of several;
+- ``evaluation_best``: the same in ``evaluation_best.json``, the evaluation of the run's best centre (the one
+  with the best training return) that ``experiments/paper.py`` writes beside it.
 
 ``rliable`` is an optional extra (``pip install -r requirements-stats.txt``), imported only when the
 statistics are computed.
@@ -30,6 +32,7 @@ statistics are computed.
 from __future__ import annotations
 
 import csv
+import functools
 import glob
 import io
 import json
@@ -87,11 +90,17 @@ def best_score(run_dir: Path, environment: str | None = None) -> float:
     return max(_centre_values(run_dir))
 
 
-def evaluation_score(run_dir: Path, environment: str | None = None) -> float:
-    """The mean return in evaluation.json, over its episodes (of ``environment``, or of all its environments)."""
-    path = run_dir / "evaluation.json"
+# the files of a run folder that score it, by score: what evaluate_*.py --json wrote, under the names
+# experiments/paper.py gives them (the final centre's evaluation, the run's result, and the best centre's)
+EVALUATIONS = {"evaluation": "evaluation.json", "evaluation_best": "evaluation_best.json"}
+
+
+def evaluation_score(run_dir: Path, environment: str | None = None, score: str = "evaluation") -> float:
+    """The mean return in the evaluation file of ``score`` (``EVALUATIONS``), over its episodes (of
+    ``environment``, or of all its environments)."""
+    path = run_dir / EVALUATIONS[score]
     if not path.is_file():
-        raise StatsError(f"{run_dir}: no evaluation.json (evaluate the run with evaluate_*.py --json "
+        raise StatsError(f"{run_dir}: no {path.name} (evaluate the run with evaluate_*.py --json "
                          f"{path}, or use --score final)")
     try:
         reports = files.read_json(path)["environments"]
@@ -108,7 +117,8 @@ def evaluation_score(run_dir: Path, environment: str | None = None) -> float:
 
 
 SCORES: dict[str, Callable[[Path, str | None], float]] = {
-    "final": final_score, "best": best_score, "evaluation": evaluation_score}
+    "final": final_score, "best": best_score,
+    **{score: functools.partial(evaluation_score, score=score) for score in EVALUATIONS}}
 
 
 # --- groups of run folders ------------------------------------------------------------------------
@@ -166,7 +176,7 @@ def collect(groups: list[str], score: str, environment: str | None = None) -> di
     if len(groups) == 0:
         raise StatsError("no --group given; give at least one, e.g. --group static='runs/static/*'")
     tasks = {environment_of(run) for runs in scores.values() for run in runs}
-    if len(tasks) > 1 and score != "evaluation":
+    if len(tasks) > 1 and score not in EVALUATIONS:
         raise StatsError(f"the runs are on different environments ({', '.join(sorted(tasks))}); report one "
                          "environment at a time")
     return scores

@@ -233,10 +233,27 @@ def test_paper_report_static_against_hebbian(tmp_path, rliable):
             evaluations = [{"environment": body, "returns": [value + seed for value in values]}
                            for body, values in zip(bodies, per_body)]
             files.write_json(run / "evaluation.json", {"environments": evaluations})
+            # the best centre's evaluation, beside it: every return 1000 lower, seed 4's file missing
+            if seed < 4:
+                best = [{"environment": body, "returns": [value + seed - 1000 for value in values]}
+                        for body, values in zip(bodies, per_body)]
+                files.write_json(run / "evaluation_best.json", {"environments": best})
     done = subprocess.run([sys.executable, "experiments/paper.py", "ant", "report", "--runs", str(tmp_path),
                            "--reps", str(REPS)],
                           check=False, cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
+    best = subprocess.run([sys.executable, "experiments/paper.py", "ant", "report", "--centre", "best", "--runs",
+                           str(tmp_path), "--reps", str(REPS)],
+                          check=False, cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert best.returncode == 0, best.stderr
+    for body, (static, hebbian) in zip(bodies, zip(returns["static"], returns["hebbian"])):
+        with open(tmp_path / "ant_report_best" / body / "summary.csv", newline="") as handle:
+            rows = {row["group"]: row for row in csv.DictReader(handle)}
+        # the three runs with a best centre's evaluation, seeds 1..3: their mean, 1000 lower
+        assert [int(rows[kind]["runs"]) for kind in ("static", "hebbian")] == [3, 3]
+        assert float(rows["static"]["mean"]) == pytest.approx(sum(static) / 2 + 2 - 1000)
+        assert float(rows["hebbian"]["mean"]) == pytest.approx(sum(hebbian) / 2 + 2 - 1000)
+    assert "Score of a run: evaluation_best" in best.stdout
     for body, (static, hebbian) in zip(bodies, zip(returns["static"], returns["hebbian"])):
         with open(tmp_path / "ant_report" / body / "summary.csv", newline="") as handle:
             rows = {row["group"]: row for row in csv.DictReader(handle)}
@@ -271,3 +288,29 @@ def test_paper_report_of_real_carracing_runs(tmp_path, rliable):
     for kind, values in scores.items():
         assert int(rows[kind]["runs"]) == 2
         assert float(rows[kind]["mean"]) == pytest.approx(np.mean(values))
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["ant", "static", "--centre", "best"], "--centre goes with report"),
+    (["ant", "report", "--centre", "middle"], "argument --centre: invalid choice: 'middle'"),
+])
+def test_paper_report_centre_is_refused_in_one_line(argv, words):
+    done = subprocess.run([sys.executable, "experiments/paper.py", *argv], check=False, cwd=ROOT,
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2 and words in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1, done.stderr
+
+
+def test_paper_report_names_the_missing_best_evaluation(tmp_path, rliable):
+    for kind in ("static", "hebbian"):
+        run = make_run(tmp_path / f"ant_{kind}_seed1", "2026_run_seed1", [0.0], env="AntBulletEnv-v0")
+        (run / "checkpoint.npz").write_bytes(b"")
+        files.write_json(run / "evaluation.json", {"environments": [{"environment": "AntBulletEnv-v0",
+                                                                     "returns": [1.0]}]})
+    done = subprocess.run([sys.executable, "experiments/paper.py", "ant", "report", "--centre", "best", "--runs",
+                           str(tmp_path)], check=False, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines() == [
+        f"paper.py: error: no static run in {tmp_path}/ant_static_seed* has evaluation_best.json; run python "
+        "experiments/paper.py ant static --seed N first"]
+    assert not (tmp_path / "ant_report_best").exists()
