@@ -12,9 +12,11 @@ several bodies.
 """
 
 from pathlib import Path
+from xml.etree import ElementTree
 
 import gymnasium as gym
 import numpy as np
+import pybullet_data
 import pytest
 
 import envs
@@ -176,6 +178,13 @@ def test_a_resting_bullet_ant_lies_below_the_alive_height_and_its_episode_ends_a
         robot = env.unwrapped.robot
         ended = [env.step(np.zeros(8, dtype=np.float32))[2] for _ in range(20)]
         assert ended[-1] and robot.body_real_xyz[2] < 0.26
+        # it lies on its torso: a sphere of radius 0.25 in the body's file (the same in pyBullet 2.6.6, the
+        # version the original pins), so the height is the file's, not the engine's
+        side = {"AntBulletEnv-v0": None, "AntAsymRightBulletEnv-v0": "right", "AntAsymLeftBulletEnv-v0": "left"}[env_id]
+        xml = damaged.bullet_xml(side) if side else Path(pybullet_data.getDataPath()) / "mjcf" / "ant.xml"
+        torso = ElementTree.parse(xml).find(".//geom[@name='torso_geom']")
+        assert (torso.get("type"), torso.get("size")) == ("sphere", "0.25")
+        assert robot.body_real_xyz[2] == pytest.approx(0.25, abs=0.005)
     finally:
         env.close()
     problem = ProblemSpec((env_id,), PolicySettings("static")).build()
