@@ -7,7 +7,8 @@ terminal watches, a progress line counts the frames written.
 
 A ``.png`` path gets a strip instead: every ``STRIP_EVERY``-th frame of the episode (the first and
 then one every few seconds of play), at half size, ``STRIP_COLUMNS`` to a row, in one picture for a
-page (only those frames are kept in memory).
+page (only those frames are rendered and kept; rendering reads the environment's state, never changes
+it, so the frames left out change nothing).
 """
 
 from __future__ import annotations
@@ -57,13 +58,15 @@ class VideoRecorder(gym.Wrapper):
     def _capture(self) -> None:
         if not self._recording:
             return
+        if self._strip is not None and self.frames_written % STRIP_EVERY:
+            self.frames_written += 1  # a frame the strip leaves out is not rendered (a pyBullet frame costs ms)
+            return
         frame = self.env.render()
         if frame is None:
             return
         frame = np.asarray(frame)[..., :3]
         if self._strip is not None:
-            if self.frames_written % STRIP_EVERY == 0:
-                self._strip.append(np.ascontiguousarray(frame[::2, ::2]))
+            self._strip.append(np.ascontiguousarray(frame[::2, ::2]))
             self.frames_written += 1
             return
         if self._writer is None:

@@ -252,6 +252,39 @@ def test_a_png_video_is_a_strip_of_every_hundredth_frame(tmp_path):
         np.testing.assert_array_equal(picture[:, index * width:(index + 1) * width], frame[::2, ::2, :3])
 
 
+def test_a_strip_renders_only_the_frames_it_keeps(tmp_path):
+    """A pyBullet frame costs milliseconds: a strip renders frames 0, 100, 200 of a 240-step episode, no
+    others, and the evaluation's return is the one without a strip."""
+    import gymnasium as gym
+
+    from report.video import STRIP_EVERY, VideoRecorder
+
+    class Counted(gym.Wrapper):
+        def __init__(self, env):
+            super().__init__(env)
+            self.renders = 0
+
+        def render(self):
+            self.renders += 1
+            return self.env.render()
+
+    def episode(env) -> float:
+        observation, _ = env.reset(seed=4)
+        total = 0.0
+        for _ in range(240):
+            observation, reward, terminated, truncated, _ = env.step(int(observation[2] + 0.5 * observation[3] > 0))
+            total += reward
+            if terminated or truncated:
+                break
+        return total
+
+    counted = Counted(gym.make("CartPole-v1", render_mode="rgb_array", max_episode_steps=240))
+    recorder = VideoRecorder(counted, tmp_path / "strip.png")
+    assert episode(recorder) == episode(gym.make("CartPole-v1", max_episode_steps=240)) == 240
+    recorder.close()
+    assert recorder.frames_written == 241 and counted.renders == len(range(0, 241, STRIP_EVERY)) == 3
+
+
 # --- 8. headless MuJoCo without a GL library ---------------------------------------------------------
 
 
