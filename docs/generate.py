@@ -25,8 +25,12 @@ file and to the run's weights; until the run is evaluated, ``PENDING``. ``<!-- s
 episodes fell below the mean by more than a quarter of it. ``<!-- frames:RUN -->`` and
 ``<!-- end frames -->`` hold its frames.png the same way. ``<!-- best:RUN [ENVIRONMENT] -->`` and
 ``<!-- end best -->`` hold the evaluation of its best centre (evaluation_best.json): mean ± std, with the
-generation it scored in and its training return. A run evaluated since its page was written is
-reported by ``--check`` as behind, not refused: the figures a page shows are always its files'.
+generation it scored in and its training return. ``<!-- report:EXPERIMENT ENVIRONMENT -->`` and
+``<!-- end report -->`` hold the campaign's report of an experiment (``experiments/paper.py EXPERIMENT
+report``, written in results/paper/EXPERIMENT_report/ENVIRONMENT/ at every chunk's end): each kind's IQM
+and mean with their intervals and P(Hebbian > static), once every run the campaign plans for it is in.
+A run evaluated (or a report completed) since its page was written is reported by ``--check`` as
+behind, not refused: the figures a page shows are always its files'.
 
 ``python docs/generate.py`` rewrites the tables and figures of every page; ``--check`` rewrites nothing and
 exits 1 naming the pages that differ (tests/test_docs.py runs the same check).
@@ -35,6 +39,7 @@ exits 1 naming the pages that differ (tests/test_docs.py runs the same check).
 from __future__ import annotations
 
 import argparse
+import csv
 import importlib
 import os
 import re
@@ -53,7 +58,14 @@ import record as records  # noqa: E402  (benchmarks/record.py: what a record hol
 from cli.errors import USER_ERRORS  # noqa: E402
 from es.files import read_json  # noqa: E402
 from experiments import campaign  # noqa: E402
-from experiments.paper import HELD_OUT_SEED, latest_run  # noqa: E402
+from experiments.paper import (  # noqa: E402
+    HELD_OUT_SEED,
+    campaign_entries,
+    latest_run,
+    load_experiment,
+    report_folder,
+    run_name,
+)
 
 MARKER = re.compile(r"(<!-- flags:(?P<script>\S+)(?: except (?P<other>\S+))? -->\n)(?P<table>.*?)(<!-- end flags -->)",
                     re.DOTALL)
@@ -207,8 +219,12 @@ RUNS = ROOT / "results" / "paper"  # the campaign's run folders
 RESULT = re.compile(r"(?<!`)(<!-- (?P<what>result|spread|best):(?P<run>[\w.-]+)(?: (?P<environment>[\w.:-]+))? -->)"
                     r"(?P<text>.*?)(?P<end><!-- end (?P=what) -->)")
 FRAMES = re.compile(r"(?<!`)(<!-- frames:(?P<run>[\w.-]+) -->)(?P<text>.*?)(?P<end><!-- end frames -->)")
+REPORT = re.compile(r"(?<!`)(<!-- report:(?P<run>\w+) (?P<environment>[\w.:-]+) -->)(?P<text>.*?)"
+                    r"(?P<end><!-- end report -->)")
 PENDING = "not yet: training in the campaign"
 FRAMES_PENDING = "(the agent's frames, once its run is evaluated)"
+REPORT_PENDING = "not yet: the campaign's seeds are still training"
+KIND_NAMES = {"hebbian": "Hebbian", "static": "static"}
 
 
 def evaluated(name: str, runs: Path, file: str = campaign.EVALUATION) -> Path | None:
@@ -310,6 +326,55 @@ def frames(name: str, page: Path, runs: Path = RUNS) -> str:
     return f"![{name}: every 100th frame of its first evaluation episode]({link(run / 'frames.png', page)})"
 
 
+def campaign_folders(experiment: str) -> dict[str, set[str]]:
+    """Per kind, the folders of the runs experiments/paper/campaign.toml plans for ``experiment``."""
+    planned: dict[str, set[str]] = {}
+    for entry in campaign_entries():
+        if entry.experiment == experiment:
+            planned.setdefault(entry.kind, set()).add(run_name(entry, load_experiment(entry)[1]))
+    return planned
+
+
+def read_rows(path: Path) -> list[dict]:
+    with open(path, newline="") as handle:
+        return list(csv.DictReader(handle))
+
+
+def report(experiment: str, environment: str, page: Path, runs: Path = RUNS,
+           planned: dict[str, set[str]] | None = None) -> str:
+    """The campaign's report of ``experiment`` on ``environment`` (``experiments/paper.py EXPERIMENT report``, in
+    ``runs``): each kind's IQM and mean with their 95 % bootstrap intervals, and P(Hebbian > static), linked to
+    the report. Pending until the report holds every run the campaign plans for the experiment (``planned``:
+    folder names per kind), so that a page shows the campaign's final comparison, never a part of it."""
+    folder = report_folder(runs, experiment) / environment
+    planned = campaign_folders(experiment) if planned is None else planned
+    try:
+        scores = read_rows(folder / "scores.csv")
+        summaries = read_rows(folder / "summary.csv")
+        pairs = read_rows(folder / "improvement.csv")
+    except FileNotFoundError:
+        return REPORT_PENDING
+    reported = {Path(row.get("run") or "").parts[0] for row in scores if row.get("run")}
+    if not planned or not all(names <= reported for names in planned.values()):
+        return REPORT_PENDING
+    try:
+        counts = sorted({int(row["runs"]) for row in summaries})
+        cells = [f"{KIND_NAMES.get(row['group'], row['group'])} IQM **{number(float(row['iqm']))}** "
+                 f"[{number(float(row['iqm_low']))}, {number(float(row['iqm_high']))}], mean "
+                 f"**{number(float(row['mean']))}** [{number(float(row['mean_low']))}, "
+                 f"{number(float(row['mean_high']))}]" for row in summaries]
+        pair = next(row for row in pairs if (row["x"], row["y"]) == ("hebbian", "static"))
+        better = (f"P(Hebbian > static) **{float(pair['probability']):.2f}** [{float(pair['low']):.2f}, "
+                  f"{float(pair['high']):.2f}]")
+    except (KeyError, ValueError, StopIteration) as error:
+        raise FigureError(f"{experiment}: {folder} is not a report of both kinds ({type(error).__name__}: {error})") \
+            from None
+    over = f"{counts[0]} runs of each kind" if len(counts) == 1 else "runs of " + ", ".join(
+        f"{row['group']}: {row['runs']}" for row in summaries)
+    return f"over {over} (95 % bootstrap intervals): {'; '.join(cells)}; {better} ([the report]" \
+           f"({link(folder / 'summary.md', page)}))"
+
+
 def render_results(text: str, page: Path, runs: Path = RUNS, behind: list[str] | None = None) -> str:
     """``text`` with every campaign result and frame strip rewritten from its run; given ``behind`` (a check),
     a marker that still reads as pending while its run has been evaluated is left as it is, and named there."""
@@ -322,7 +387,9 @@ def render_results(text: str, page: Path, runs: Path = RUNS, behind: list[str] |
     writers = {"result": result, "spread": spread, "best": best}
     text = RESULT.sub(lambda match: rewrite(match, writers[match["what"]](match["run"], match["environment"], page,
                                                                           runs), PENDING), text)
-    return FRAMES.sub(lambda match: rewrite(match, frames(match["run"], page, runs), FRAMES_PENDING), text)
+    text = FRAMES.sub(lambda match: rewrite(match, frames(match["run"], page, runs), FRAMES_PENDING), text)
+    return REPORT.sub(lambda match: rewrite(match, report(match["run"], match["environment"], page, runs),
+                                            REPORT_PENDING), text)
 
 
 def render(text: str, page: Path | None = None, behind: list[str] | None = None) -> str:

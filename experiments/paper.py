@@ -268,38 +268,56 @@ def training_curves(args: argparse.Namespace) -> int:
     return 0
 
 
-def report(args: argparse.Namespace) -> int:
-    """Static against Hebbian: each seed's newest run, scored by the evaluation of its last or best centre
-    (``--centre``), per evaluation environment."""
+def report_folder(runs: Path, experiment: str, centre: str = "last") -> Path:
+    """Where the report of ``experiment``'s runs in ``runs`` goes: one folder per evaluation environment in it."""
+    return runs / (f"{experiment}_report" + ("" if centre == "last" else f"_{centre}"))
+
+
+def evaluated_runs(runs: Path, experiment: str, kind: str, file: str = campaign.EVALUATION) -> list[Path]:
+    """Each seed's newest run of ``kind`` in ``runs`` that has the evaluation ``file``."""
+    return [run for folder in sorted(runs.glob(f"{experiment}_{kind}_seed*"))
+            if (run := latest_run(folder)) is not None and (run / file).exists()]
+
+
+def write_report(runs: Path, experiment: str, centre: str = "last", reps: int = DEFAULT_REPS) -> list[tuple]:
+    """Static against Hebbian: each seed's newest run in ``runs``, scored by the evaluation of its ``centre``,
+    one report per evaluation environment in ``report_folder``, its runs named relative to ``runs``. Returns
+    (environment, folder, stats.Report) for each; stats.StatsError says what is missing."""
     from report import stats
 
     if not stats.available():
-        print(f"paper.py: error: the report needs rliable, which is not installed; install it with: "
-              f"{stats.INSTALL_HINT}", file=sys.stderr)
-        return 2
-    with open(FILES / f"{args.experiment}_static.toml", "rb") as handle:
+        raise stats.StatsError(f"the report needs rliable, which is not installed; install it with: "
+                               f"{stats.INSTALL_HINT}")
+    with open(FILES / f"{experiment}_static.toml", "rb") as handle:
         named = tomllib.load(handle)["evaluation"]["environment"].split(",")
     # as evaluation.json names them: the ids they resolve to (CarRacing-v0 -> CarRacing-v3)
     environments = [envs.resolve_env_id(env_id, notify=lambda *_: None) for env_id in named]
-    centre = args.centre or "last"
     file = dict((name, file) for name, file, _ in CENTRES)[centre]
     score = next(score for score, name in stats.EVALUATIONS.items() if name == file)
     groups = []
     for kind in TRAIN_SCRIPTS:
-        runs = [run for folder in sorted(args.runs.glob(f"{args.experiment}_{kind}_seed*"))
-                if (run := latest_run(folder)) is not None and (run / file).exists()]
-        if not runs:
-            print(f"paper.py: error: no {kind} run in {args.runs}/{args.experiment}_{kind}_seed* has {file}; run "
-                  f"python experiments/paper.py {args.experiment} {kind} --seed N first", file=sys.stderr)
-            return 2
-        groups.append(f"{kind}={','.join(map(str, runs))}")
+        found = evaluated_runs(runs, experiment, kind, file)
+        if not found:
+            raise stats.StatsError(f"no {kind} run in {runs}/{experiment}_{kind}_seed* has {file}; run python "
+                                   f"experiments/paper.py {experiment} {kind} --seed N first")
+        groups.append(f"{kind}={','.join(map(str, found))}")
+    written = []
     for environment in environments:
-        out = args.runs / (f"{args.experiment}_report" + ("" if centre == "last" else f"_{centre}")) / environment
-        try:
-            result = stats.report(groups, out, score, environment, reps=args.reps)
-        except stats.StatsError as error:
-            print(f"paper.py: error: {error}", file=sys.stderr)
-            return 2
+        out = report_folder(runs, experiment, centre) / environment
+        written.append((environment, out, stats.report(groups, out, score, environment, reps=reps, root=runs)))
+    return written
+
+
+def report(args: argparse.Namespace) -> int:
+    """``EXPERIMENT report``: ``write_report`` of the runs in --runs, printed."""
+    from report import stats
+
+    try:
+        written = write_report(args.runs, args.experiment, args.centre or "last", args.reps)
+    except stats.StatsError as error:
+        print(f"paper.py: error: {error}", file=sys.stderr)
+        return 2
+    for environment, out, result in written:
         print(f"## {environment} (written to {out})\n\n{result.markdown}", flush=True)
     return 0
 
@@ -457,10 +475,12 @@ def run_campaign(args: argparse.Namespace, experiment: dict, command: list[str],
 
 
 def write_pages(runs: Path, experiment: str) -> None:
-    """At a chunk's end, beside the runs: ``progress.md`` (``progress_page``) and the experiment's curves
-    (``curves_figure``), so that what a session commits says how far the campaign got. A file that cannot be
-    written is named; the chunk's run stays as it was saved."""
+    """At a chunk's end, beside the runs: ``progress.md`` (``progress_page``), the experiment's curves
+    (``curves_figure``) and, once both kinds have an evaluated run, its report (``write_report``), so that
+    what a session commits says how far the campaign got. A file that cannot be written is named; the
+    chunk's run stays as it was saved."""
     from es import files
+    from report import stats
 
     try:
         files.atomic_write_text(runs / campaign.PROGRESS, progress_page(runs))
@@ -470,6 +490,15 @@ def write_pages(runs: Path, experiment: str) -> None:
             f"{type(error).__name__}: {error}")
         return
     say(f"campaign: wrote {shown(runs / campaign.PROGRESS)}" + (f" and {shown(written[0])}" if written else ""))
+    if not all(evaluated_runs(runs, experiment, kind) for kind in TRAIN_SCRIPTS):
+        return
+    try:
+        reported = write_report(runs, experiment)
+    except (stats.StatsError, OSError) as error:
+        say(f"campaign: the report of {experiment} was not written: {error}")
+        return
+    say(f"campaign: wrote the report of {experiment}'s evaluated runs in {shown(report_folder(runs, experiment))} "
+        f"({', '.join(environment for environment, _, _ in reported)})")
 
 
 def continue_words(args: argparse.Namespace) -> str:

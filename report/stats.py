@@ -37,6 +37,7 @@ import glob
 import io
 import json
 import math
+import os
 import warnings
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
@@ -378,9 +379,10 @@ class Report:
 
 
 def report(groups: list[str], out: Path, score: str = "final", environment: str | None = None,
-           reps: int = DEFAULT_REPS, seed: int = 0) -> Report:
+           reps: int = DEFAULT_REPS, seed: int = 0, root: Path | None = None) -> Report:
     """Compute everything and write ``summary.md``, ``summary.csv``, ``improvement.csv``,
-    ``scores.csv`` and ``report.png`` in ``out``."""
+    ``scores.csv`` and ``report.png`` in ``out``; ``scores.csv`` names each run as its group gave it, or
+    relative to ``root`` (a report committed beside its runs, read on any machine)."""
     from report.plots import write_figure
 
     per_run = collect(groups, score, environment)
@@ -395,7 +397,10 @@ def report(groups: list[str], out: Path, score: str = "final", environment: str 
     files.atomic_write_text(out / "summary.csv", csv_text([asdict(summary) for summary in summaries]))
     if pairs:
         files.atomic_write_text(out / "improvement.csv", csv_text([asdict(pair) for pair in pairs]))
-    files.atomic_write_text(out / "scores.csv", csv_text([{"group": name, "run": str(run), "score": value}
+    def named(run: Path) -> str:
+        return str(run) if root is None else Path(os.path.relpath(run, root)).as_posix()
+
+    files.atomic_write_text(out / "scores.csv", csv_text([{"group": name, "run": named(run), "score": value}
                                                            for name, runs in per_run.items()
                                                            for run, value in runs.items()]))
     write_figure(figure(summaries, curves, taus, pairs), out / "report.png", bbox_inches="tight")

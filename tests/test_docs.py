@@ -713,6 +713,53 @@ def test_a_campaign_result_not_yet_evaluated_is_pending_and_a_late_page_is_behin
     assert generate.PENDING not in generate.render_results(written, page, tmp_path)  # a rewrite fills it in
 
 
+def test_the_campaigns_report_is_rendered_once_every_planned_run_is_in(tmp_path):
+    """<!-- report:EXPERIMENT ENVIRONMENT -->: the files experiments/paper.py's report writes (report/stats.py's
+    own CSV writer here), pending until the report holds every run the campaign plans, then each kind's IQM
+    and mean with their intervals and P(Hebbian > static)."""
+    from dataclasses import asdict
+
+    from report import stats
+
+    assert generate.campaign_folders("carracing") == {
+        kind: {f"carracing_{kind}_seed{seed}" for seed in (1, 2, 3)} for kind in ("hebbian", "static")}
+    page = ROOT / "README.md"
+    folder = tmp_path / "carracing_report" / "CarRacing-v3"
+    planned = {kind: {f"carracing_{kind}_seed{seed}" for seed in (1, 2)} for kind in ("static", "hebbian")}
+
+    def rendered() -> str:
+        return generate.report("carracing", "CarRacing-v3", page, tmp_path, planned)
+
+    assert rendered() == generate.REPORT_PENDING  # no report yet
+    folder.mkdir(parents=True)
+    summaries = [stats.Summary("static", 2, 840.25, 830.5, 850.0, 841.0, 829.0, 852.75, 840.25),
+                 stats.Summary("hebbian", 2, 866.75, 860.0, 873.5, 866.75, 860.0, 873.5, 866.75)]
+    (folder / "summary.csv").write_text(stats.csv_text([asdict(summary) for summary in summaries]))
+    (folder / "improvement.csv").write_text(stats.csv_text([asdict(stats.Improvement("static", "hebbian", 0.25, 0.0,
+                                                                                     0.75)),
+                                                            asdict(stats.Improvement("hebbian", "static", 0.75, 0.25,
+                                                                                     1.0))]))
+
+    def scores(*folders: str) -> None:
+        (folder / "scores.csv").write_text(stats.csv_text([{"group": name.split("_")[1], "run": f"{name}/2026_run",
+                                                            "score": 1.0} for name in folders]))
+
+    scores("carracing_static_seed1", "carracing_hebbian_seed1", "carracing_hebbian_seed2")
+    assert rendered() == generate.REPORT_PENDING  # static seed 2 is not in yet
+    scores("carracing_static_seed1", "carracing_static_seed2", "carracing_hebbian_seed1", "carracing_hebbian_seed2")
+    summary = os.path.relpath(folder / "summary.md", page.parent)
+    assert rendered() == ("over 2 runs of each kind (95 % bootstrap intervals): static IQM **840** [830, 850], mean "
+                          "**841** [829, 853]; Hebbian IQM **867** [860, 874], mean **867** [860, 874]; "
+                          f"P(Hebbian > static) **0.75** [0.25, 1.00] ([the report]({summary}))")
+    written = f"<!-- report:carracing CarRacing-v3 -->{generate.REPORT_PENDING}<!-- end report -->"
+    behind = []  # the campaign's own plan, seeds 1-3, is not complete in this report: still pending, not behind
+    assert generate.render_results(written, page, tmp_path, behind) == written and behind == []
+    (folder / "improvement.csv").write_text(stats.csv_text([asdict(stats.Improvement("static", "hebbian", 0.25, 0.0,
+                                                                                     0.75))]))
+    with pytest.raises(generate.FigureError, match="not a report of both kinds"):
+        rendered()
+
+
 def test_a_record_of_counts_is_never_loaded(tmp_path, monkeypatch):
     """Steps to solve from seeded runs do not move with the load: such a record (timed=False) keeps its load
     but is not marked loaded; a timed one taken at the same load is."""

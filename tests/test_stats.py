@@ -269,6 +269,8 @@ def test_paper_report_of_real_carracing_runs(tmp_path, rliable):
     """experiments/paper.py carracing report over runs that paper.py itself trained and evaluated (small ones):
     the experiment file's CarRacing-v0 is the evaluation's CarRacing-v3, and each kind's mean is the mean of its
     runs' evaluation means."""
+    import experiments.paper as paper_script
+
     scores = {}
     for kind in ("static", "hebbian"):
         for seed in (1, 2):
@@ -279,9 +281,28 @@ def test_paper_report_of_real_carracing_runs(tmp_path, rliable):
             (evaluation,) = folder.glob("*/evaluation.json")
             (written,) = files.read_json(evaluation)["environments"]
             scores.setdefault(kind, []).append(float(np.mean(written["returns"])))
-    done = subprocess.run([sys.executable, "experiments/paper.py", "carracing", "report", "--runs", str(tmp_path),
-                           "--reps", str(REPS)], check=False, cwd=ROOT, capture_output=True, text=True, timeout=600)
+        # a chunk's end writes the report once both kinds have an evaluated run, not before
+        paper_script.write_pages(tmp_path, "carracing")
+        assert (tmp_path / "carracing_report").exists() == (kind == "hebbian")
+    # the runs named relative to the folder of runs, so that the report reads the same from any clone
+    with open(tmp_path / "carracing_report" / "CarRacing-v3" / "scores.csv", newline="") as handle:
+        named = sorted(row["run"] for row in csv.DictReader(handle))
+    assert named == sorted(path.parent.relative_to(tmp_path).as_posix()
+                           for path in tmp_path.glob("carracing_*_seed*/*/evaluation.json"))
+    pages = {name: (tmp_path / "carracing_report" / "CarRacing-v3" / name).read_bytes()
+             for name in ("summary.md", "summary.csv", "improvement.csv", "scores.csv")}
+    done = subprocess.run([sys.executable, "experiments/paper.py", "carracing", "report", "--runs", str(tmp_path)],
+                          check=False, cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
+    assert {name: (tmp_path / "carracing_report" / "CarRacing-v3" / name).read_bytes() for name in pages} == pages
+    # committed with the runs by results/paper/.gitignore
+    (tmp_path / ".gitignore").write_bytes((ROOT / "results" / "paper" / ".gitignore").read_bytes())
+    subprocess.run(["git", "init", "-q"], cwd=tmp_path, check=True)
+    subprocess.run(["git", "add", "-A"], cwd=tmp_path, check=True)
+    listed = subprocess.run(["git", "ls-files", "carracing_report"], cwd=tmp_path, check=True, capture_output=True,
+                            text=True).stdout.split()
+    assert listed == [f"carracing_report/CarRacing-v3/{name}" for name in
+                      ("improvement.csv", "report.png", "scores.csv", "summary.csv", "summary.md")]
     assert "## CarRacing-v3" in done.stdout
     with open(tmp_path / "carracing_report" / "CarRacing-v3" / "summary.csv", newline="") as handle:
         rows = {row["group"]: row for row in csv.DictReader(handle)}
