@@ -357,21 +357,30 @@ def report(experiment: str, environment: str, page: Path, runs: Path = RUNS,
     reported = {Path(row.get("run") or "").parts[0] for row in scores if row.get("run")}
     if not planned or not all(names <= reported for names in planned.values()):
         return REPORT_PENDING
+
+    def interval(row: dict, low: str, high: str, single: bool, show=number) -> str:
+        # a group of one run has no interval: every resample is that run (report/stats.py's markdown)
+        return " (no interval: 1 run)" if single else f" [{show(float(row[low]))}, {show(float(row[high]))}]"
+
     try:
-        counts = sorted({int(row["runs"]) for row in summaries})
-        cells = [f"{KIND_NAMES.get(row['group'], row['group'])} IQM **{number(float(row['iqm']))}** "
-                 f"[{number(float(row['iqm_low']))}, {number(float(row['iqm_high']))}], mean "
-                 f"**{number(float(row['mean']))}** [{number(float(row['mean_low']))}, "
-                 f"{number(float(row['mean_high']))}]" for row in summaries]
+        counts = {row["group"]: int(row["runs"]) for row in summaries}
+        sizes = set(counts.values())
+        if not sizes:
+            raise ValueError("no group")
+        cells = [f"{KIND_NAMES.get(row['group'], row['group'])} IQM **{number(float(row['iqm']))}**"
+                 f"{interval(row, 'iqm_low', 'iqm_high', counts[row['group']] == 1)}, mean "
+                 f"**{number(float(row['mean']))}**{interval(row, 'mean_low', 'mean_high', counts[row['group']] == 1)}"
+                 for row in summaries]
         pair = next(row for row in pairs if (row["x"], row["y"]) == ("hebbian", "static"))
-        better = (f"P(Hebbian > static) **{float(pair['probability']):.2f}** [{float(pair['low']):.2f}, "
-                  f"{float(pair['high']):.2f}]")
+        better = (f"P(Hebbian > static) **{float(pair['probability']):.2f}**"
+                  f"{interval(pair, 'low', 'high', min(counts.values()) == 1, lambda value: f'{value:.2f}')}")
     except (KeyError, ValueError, StopIteration) as error:
         raise FigureError(f"{experiment}: {folder} is not a report of both kinds ({type(error).__name__}: {error})") \
             from None
-    over = f"{counts[0]} runs of each kind" if len(counts) == 1 else "runs of " + ", ".join(
-        f"{row['group']}: {row['runs']}" for row in summaries)
-    return f"over {over} (95 % bootstrap intervals): {'; '.join(cells)}; {better} ([the report]" \
+    over = (f"{min(sizes)} run{'s' if min(sizes) > 1 else ''} of each kind" if len(sizes) == 1 else
+            "runs of " + ", ".join(f"{group}: {count}" for group, count in counts.items()))
+    over += " (95 % bootstrap intervals)" if max(sizes) > 1 else ""
+    return f"over {over}: {'; '.join(cells)}; {better} ([the report]" \
            f"({link(folder / 'summary.md', page)}))"
 
 

@@ -717,7 +717,7 @@ def test_the_campaigns_report_is_rendered_once_every_planned_run_is_in(tmp_path)
     """<!-- report:EXPERIMENT ENVIRONMENT -->: the files experiments/paper.py's report writes (report/stats.py's
     own CSV writer here), pending until the report holds every run the campaign plans, then each kind's IQM
     and mean with their intervals and P(Hebbian > static)."""
-    from dataclasses import asdict
+    from dataclasses import asdict, replace
 
     from report import stats
 
@@ -754,6 +754,12 @@ def test_the_campaigns_report_is_rendered_once_every_planned_run_is_in(tmp_path)
     written = f"<!-- report:carracing CarRacing-v3 -->{generate.REPORT_PENDING}<!-- end report -->"
     behind = []  # the campaign's own plan, seeds 1-3, is not complete in this report: still pending, not behind
     assert generate.render_results(written, page, tmp_path, behind) == written and behind == []
+    # one run per kind: no interval (every resample is that run), as the report itself says
+    planned = {kind: {f"carracing_{kind}_seed1"} for kind in ("static", "hebbian")}
+    (folder / "summary.csv").write_text(stats.csv_text([asdict(replace(summary, runs=1)) for summary in summaries]))
+    assert rendered() == ("over 1 run of each kind: static IQM **840** (no interval: 1 run), mean **841** (no "
+                          "interval: 1 run); Hebbian IQM **867** (no interval: 1 run), mean **867** (no interval: "
+                          f"1 run); P(Hebbian > static) **0.75** (no interval: 1 run) ([the report]({summary}))")
     (folder / "improvement.csv").write_text(stats.csv_text([asdict(stats.Improvement("static", "hebbian", 0.25, 0.0,
                                                                                      0.75))]))
     with pytest.raises(generate.FigureError, match="not a report of both kinds"):
