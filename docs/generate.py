@@ -352,9 +352,11 @@ def report(experiment: str, environment: str, page: Path, runs: Path = RUNS,
         scores = read_rows(folder / "scores.csv")
         summaries = read_rows(folder / "summary.csv")
         pairs = read_rows(folder / "improvement.csv")
+        reported = {Path(row["run"]).parts[0] for row in scores}  # the runs' folders: carracing_static_seed1, ...
     except FileNotFoundError:
         return REPORT_PENDING
-    reported = {Path(row.get("run") or "").parts[0] for row in scores if row.get("run")}
+    except (KeyError, IndexError):
+        raise FigureError(f"{experiment}: {folder / 'scores.csv'} names no runs") from None
     if not planned or not all(names <= reported for names in planned.values()):
         return REPORT_PENDING
 

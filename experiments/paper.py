@@ -292,8 +292,8 @@ def write_report(runs: Path, experiment: str, centre: str = "last", reps: int = 
         named = tomllib.load(handle)["evaluation"]["environment"].split(",")
     # as evaluation.json names them: the ids they resolve to (CarRacing-v0 -> CarRacing-v3)
     environments = [envs.resolve_env_id(env_id, notify=lambda *_: None) for env_id in named]
-    file = dict((name, file) for name, file, _ in CENTRES)[centre]
-    score = next(score for score, name in stats.EVALUATIONS.items() if name == file)
+    score = "evaluation" if centre == "last" else "evaluation_best"  # report/stats.py's score of that centre's file
+    file = stats.EVALUATIONS[score]
     groups = []
     for kind in TRAIN_SCRIPTS:
         found = evaluated_runs(runs, experiment, kind, file)

@@ -397,6 +397,7 @@ def report(groups: list[str], out: Path, score: str = "final", environment: str 
     files.atomic_write_text(out / "summary.csv", csv_text([asdict(summary) for summary in summaries]))
     if pairs:
         files.atomic_write_text(out / "improvement.csv", csv_text([asdict(pair) for pair in pairs]))
+
     def named(run: Path) -> str:
         return str(run) if root is None else Path(os.path.relpath(run, root)).as_posix()
 
