@@ -432,10 +432,10 @@ def projection(record: Record, key: str, step_rates: tuple[list[float], list[flo
 
 
 def summary(record: Record, key: str, label: str, stock: list[float], fast: list[float], target: float | None = None,
-            unit: str = "steps") -> None:
+            unit: str = "steps", stock_name: str = "Gymnasium's") -> None:
     ratios = [f / s for s, f in zip(stock, fast)]
-    record.add(key, f"{label}: the fast class / Gymnasium's, {unit} per CPU second", "x", ratios)
-    record.add(f"{key}_stock", f"{label}: Gymnasium's class, {unit} per CPU second", f"{unit}/s", stock)
+    record.add(key, f"{label}: the fast class / {stock_name}, {unit} per CPU second", "x", ratios)
+    record.add(f"{key}_stock", f"{label}: {stock_name} class, {unit} per CPU second", f"{unit}/s", stock)
     record.add(f"{key}_fast", f"{label}: the fast class, {unit} per CPU second", f"{unit}/s", fast)
     goal = f" (target >= {target}x)" if target else ""
     print(f"{label}: stock {statistics.median(stock):,.1f}, fast {statistics.median(fast):,.1f} {unit} per CPU "

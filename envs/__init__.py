@@ -1,10 +1,11 @@
 """Environments: construction, per-family recipes, wrappers, damaged morphologies, the rollout.
 
 Importing this package lets pygame run without a display (unless the user chose a video driver),
-registers the pyBullet environments and the damaged ants with Gymnasium, and makes ``CarRacing-v3``
+registers the pyBullet environments and the damaged ants with Gymnasium, makes ``CarRacing-v3``
 the fast, pixel-identical ``envs.car_racing.FastCarRacing`` (Gymnasium's own class stays available as
-``CarRacingStock-v3``). MuJoCo's GL backend is left alone: training never renders, and
-``envs.headless`` chooses one when frames are asked for.
+``CarRacingStock-v3``), and pyBullet's four walkers their batched classes of ``envs.bullet_locomotion``,
+with the same numbers (pyBullet's own stay available as ``*BulletStockEnv-v0``). MuJoCo's GL backend
+is left alone: training never renders, and ``envs.headless`` chooses one when frames are asked for.
 """
 
 import os
@@ -24,9 +25,13 @@ from envs.settings import EnvSettings  # noqa: E402
 gym.logger.min_level = 40  # errors only, as the original (gym.logger.set_level(40))
 with quiet_output():
     try:
-        import pybullet_envs_gymnasium  # noqa: F401  (registers *BulletEnv-v0)
+        import pybullet_envs_gymnasium  # registers *BulletEnv-v0
     except ImportError:  # pyBullet is optional for users who only need Gymnasium/MuJoCo
-        pass
+        pybullet_envs_gymnasium = None
+if pybullet_envs_gymnasium is not None:
+    from envs import bullet_locomotion
+
+    bullet_locomotion.register()
 
 import envs.damaged  # noqa: E402,F401  (registers the damaged ants of Najarro & Risi 2020)
 

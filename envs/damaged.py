@@ -79,11 +79,14 @@ def damage_ant_xml(text: str, side: str) -> str:
 
 
 @functools.cache
-def _damaged_bullet_ant_class() -> type:
-    """Built on first use, so that pyBullet stays optional for this module."""
+def damaged_bullet_ant_class(stock: bool = False) -> type:
+    """Built on first use, so that pyBullet stays optional for this module; on the batched ant of
+    ``envs.bullet_locomotion`` unless ``stock`` (pyBullet's own, to check a result against)."""
     from pybullet_envs_gymnasium.gym_locomotion_envs import AntBulletEnv
 
-    class DamagedAntBulletEnv(AntBulletEnv):
+    from envs.bullet_locomotion import fast_class
+
+    class DamagedAntBulletEnv(AntBulletEnv if stock else fast_class(AntBulletEnv)):
         """``AntBulletEnv`` whose robot loads another MJCF file.
 
         pyBullet joins ``model_xml`` to its data folder with ``os.path.join``, which keeps an
@@ -99,7 +102,7 @@ def _damaged_bullet_ant_class() -> type:
 
 def make_damaged_bullet_ant(xml_path: str, render_mode: str | None = None) -> gym.Env:
     """Entry point of the damaged pyBullet ants."""
-    return _damaged_bullet_ant_class()(xml_path, render_mode=render_mode)
+    return damaged_bullet_ant_class()(xml_path, render_mode=render_mode)
 
 
 def register() -> None:

@@ -1,0 +1,128 @@
+"""pyBullet's walkers stepped with batched queries (envs/bullet_locomotion.py) against pyBullet's own
+classes, side by side:
+
+- every walker the module speeds up, and both damaged ants, give the same observations (byte for
+  byte), rewards, episode ends, contacts and torso pose as the stock class, over several episodes
+  with reseeded resets and actions beyond [-1, 1] (clipped by both), the batched path being the one
+  that ran;
+- a walker that applies its own torques (the humanoid) keeps pyBullet's step, with the same numbers;
+- the registered ids make the fast classes, the ``*BulletStockEnv-v0`` ids pyBullet's own, with the
+  same spec otherwise; the fast classes pickle by reference, for worker processes;
+- a rendered frame of the fast class equals the stock class's.
+"""
+
+import pickle
+
+import gymnasium as gym
+import numpy as np
+import pybullet_envs_gymnasium.gym_locomotion_envs as locomotion
+import pytest
+
+import envs
+from envs import bullet_locomotion, damaged
+from envs.make import quiet_output
+
+STOCK_CLASSES = {env_id: getattr(locomotion, gym.spec(stock_id).entry_point.rpartition(":")[2])
+                 for env_id, stock_id in bullet_locomotion.STOCK_IDS.items()}
+
+
+def pair(env_id: str):
+    """(stock, fast) instances of ``env_id``'s class."""
+    with quiet_output():
+        if env_id in damaged.BULLET_IDS:
+            xml = str(damaged.bullet_xml(damaged.BULLET_IDS[env_id]))
+            return damaged.damaged_bullet_ant_class(stock=True)(xml), damaged.damaged_bullet_ant_class()(xml)
+        stock = getattr(locomotion, gym.spec(env_id).entry_point.rpartition(":")[2])
+        return stock(), bullet_locomotion.fast_class(stock)()
+
+
+def run_side_by_side(env_id: str, steps: int, episode_steps: int) -> dict:
+    stock, fast = pair(env_id)
+    rng = np.random.default_rng(7)
+    size = stock.action_space.shape[0]
+    seen = {"episodes": 0, "terminated": 0, "contacts": set(), "batched": []}
+    for env in (stock, fast):
+        env.reset(seed=11)
+    seen["batched"].append(fast._plan is not None)
+    length = 0
+    for _ in range(steps):
+        action = (rng.normal(size=size) * 1.2).astype(np.float32)  # about a third of them beyond [-1, 1]
+        obs_a, reward_a, term_a, trunc_a, _ = stock.step(action)
+        obs_b, reward_b, term_b, trunc_b, _ = fast.step(action)
+        assert obs_a.dtype == obs_b.dtype and obs_a.tobytes() == obs_b.tobytes()
+        assert (reward_a, term_a, trunc_a) == (reward_b, term_b, trunc_b)
+        assert stock.rewards == fast.rewards
+        assert stock.robot.feet_contact.tobytes() == fast.robot.feet_contact.tobytes()
+        assert np.array_equal(stock.robot.body_real_xyz, fast.robot.body_real_xyz)
+        assert stock.robot.body_xyz == fast.robot.body_xyz and stock.robot.body_rpy == fast.robot.body_rpy
+        seen["contacts"].update(fast.robot.feet_contact.tolist())
+        length += 1
+        if term_a or length == episode_steps:
+            seen["episodes"] += 1
+            seen["terminated"] += bool(term_a)
+            seed = int(rng.integers(2**31))
+            first_a, _ = stock.reset(seed=seed)
+            first_b, _ = fast.reset(seed=seed)
+            assert first_a.tobytes() == first_b.tobytes()
+            seen["batched"].append(fast._plan is not None)
+            length = 0
+    for env in (stock, fast):
+        env.close()
+    return seen
+
+
+@pytest.mark.parametrize("env_id", [*bullet_locomotion.FAST_IDS, *damaged.BULLET_IDS])
+def test_the_batched_step_gives_pybullets_numbers(env_id):
+    seen = run_side_by_side(env_id, steps=360, episode_steps=120)
+    assert all(seen["batched"])
+    assert seen["episodes"] >= 3
+    assert seen["contacts"] == {0.0, 1.0}  # feet on and off the ground, through the batched contact query
+
+
+def test_episodes_that_end_by_falling_match_too():
+    seen = run_side_by_side("HopperBulletEnv-v0", steps=300, episode_steps=1000)
+    assert seen["terminated"] >= 3 and all(seen["batched"])
+
+
+def test_a_walker_with_its_own_torques_keeps_pybullets_step():
+    seen = run_side_by_side("HumanoidBulletEnv-v0", steps=40, episode_steps=20)
+    assert not any(seen["batched"])
+
+
+@pytest.mark.parametrize("env_id, stock_id", bullet_locomotion.STOCK_IDS.items())
+def test_ids_make_the_fast_class_and_the_stock_one(env_id, stock_id):
+    fast, stock = gym.spec(env_id), gym.spec(stock_id)
+    assert fast.entry_point == f"envs.bullet_locomotion:{stock.entry_point.rpartition(':')[2]}"
+    assert stock.entry_point.startswith("pybullet_envs_gymnasium.gym_locomotion_envs:")
+    assert (fast.max_episode_steps, fast.reward_threshold, fast.kwargs) == \
+           (stock.max_episode_steps, stock.reward_threshold, stock.kwargs)
+    made, _ = envs.make_env(env_id)
+    try:
+        assert isinstance(made.unwrapped, bullet_locomotion.FastWalker)
+        assert isinstance(made.unwrapped, STOCK_CLASSES[env_id])
+        assert pickle.loads(pickle.dumps(type(made.unwrapped))) is type(made.unwrapped)
+    finally:
+        made.close()
+    made, _ = envs.make_env(stock_id)
+    try:
+        assert type(made.unwrapped) is STOCK_CLASSES[env_id]
+    finally:
+        made.close()
+
+
+def test_an_unknown_name_is_not_a_fast_class():
+    with pytest.raises(AttributeError, match="no attribute 'CarRacing'"):
+        bullet_locomotion.CarRacing  # noqa: B018
+
+
+def test_a_rendered_frame_is_the_stock_classs():
+    frames = []
+    for env_id in ("AntBulletStockEnv-v0", "AntBulletEnv-v0"):
+        with quiet_output():
+            env = gym.make(env_id, render_mode="rgb_array")
+        env.reset(seed=5)
+        for _ in range(30):
+            env.step(np.full(8, 0.5, dtype=np.float32))
+        frames.append(env.render())
+        env.close()
+    assert frames[0].shape == frames[1].shape and frames[0].tobytes() == frames[1].tobytes()
