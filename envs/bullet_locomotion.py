@@ -1,13 +1,13 @@
 """pyBullet's walkers (ant, half-cheetah, hopper, walker) stepped faster, with the same numbers.
 
 ``pybullet_envs_gymnasium`` computes each step's observation and reward in Python, one physics
-query per joint, per body part and per foot: the ant asks pyBullet 42 times a step, and those
-queries cost more than the physics itself. ``FastWalker`` asks the same questions in four batched
-queries (joint states, link states, base pose and velocity, contacts) and keeps every line of
-arithmetic of ``WalkerBase.calc_state``, ``WalkerBase.apply_action`` and
-``WalkerBaseBulletEnv.step`` in the same order on the same dtypes, so observations, rewards and
-episode ends are bit for bit pyBullet's own (``tests/test_bullet_locomotion.py`` steps both side by
-side).
+query per joint, per body part and per foot: the ant calls pyBullet 46 times a step besides stepping
+its physics, and those calls cost more than the physics itself. ``FastWalker`` asks the same
+questions in batches (the torques, the joint states, the links' states, each base's pose, the
+torso's velocity, the contacts: seven calls for the ant) and keeps every line of arithmetic of
+``WalkerBase.calc_state``, ``WalkerBase.apply_action`` and ``WalkerBaseBulletEnv.step`` in the same
+order on the same dtypes, so observations, rewards and episode ends are bit for bit pyBullet's own
+(``tests/test_bullet_locomotion.py`` steps both side by side).
 
 The registered ``*BulletEnv-v0`` walkers make the fast classes; ``envs.bullet_locomotion.STOCK_IDS``
 maps each to a ``*BulletStockEnv-v0`` id that makes pyBullet's own class, to check any result
