@@ -144,10 +144,12 @@ class Trainer:
         with Interrupts() as interrupts:
             try:
                 while self.state.generation < self.run.generations:
-                    self.generation()
-                    done = self.state.generation
-                    if done % self.run.print_every == 0 or done == self.run.generations or interrupts.requested:
-                        self.save()
+                    row = self._step()
+                    with interrupts.held():  # the metrics row and the save it may take agree, even at a stop
+                        self._publish(row)
+                        done = self.state.generation
+                        if done % self.run.print_every == 0 or done == self.run.generations or interrupts.requested:
+                            self.save()
                     if interrupts.requested:
                         return Status.INTERRUPTED
             except (EvaluationError, WorkerStartError, SaveError, NonFiniteUpdate) as error:
@@ -165,7 +167,13 @@ class Trainer:
         return recorded
 
     def generation(self) -> dict:
-        """One generation, top to bottom; its metrics row."""
+        """One generation, top to bottom, its metrics row written; the row."""
+        row = self._step()
+        self._publish(row)
+        return row
+
+    def _step(self) -> dict:
+        """One generation's episodes and update; its metrics row, kept in the history but not yet written."""
         started, state, popsize = time.perf_counter(), self.state, self.es.popsize
         rng = generation_rng(self.run.seed, state.generation)
         population = self.strategy.ask(state, rng, self.noise)
@@ -247,7 +255,7 @@ class Trainer:
 
     def _record(self, fitness: np.ndarray, returns: np.ndarray, center: CenterReport, info: dict, steps: int,
                 episode_cap: int, seconds: float) -> dict:
-        """Append the generation's metrics row, rewrite metrics.csv, tell the reporters."""
+        """Append the generation's metrics row to the history; the row."""
         history, after, finite = self.history, self.state, np.isfinite(fitness)
         history.total_steps += steps
         history.total_seconds += seconds
@@ -269,10 +277,13 @@ class Trainer:
         history.metrics.append(row)
         if after.generation % self.run.print_every == 0:
             history.fitness_log.append(row["fitness_mean"])
-        self.folder.write_metrics(history.metrics, self.policy.metrics_columns)
+        return row
+
+    def _publish(self, row: dict) -> None:
+        """Rewrite metrics.csv with every row so far and tell the reporters of ``row``."""
+        self.folder.write_metrics(self.history.metrics, self.policy.metrics_columns)
         for reporter in self.reporters:
             reporter.generation(row)
-        return row
 
     def save(self) -> None:
         """The run's files, what the reporters save, and last the checkpoint: a save cut short

@@ -18,6 +18,9 @@ import pytest
 import train_static
 from es import files
 from es.backends import Results
+from es.interrupts import Interrupts
+from es.loop import Reporter
+from es.runfolder import read_checkpoint
 from es.shaping import rank_std
 from report.log import GenerationLog
 from tests.run_helpers import Training, descendants, hint, only_run, small_trainer, still_running
@@ -235,3 +238,45 @@ def test_a_full_disk_stops_the_run_naming_the_file_and_keeps_earlier_files(tmp_p
     monkeypatch.undo()  # space is freed: the run goes on from its checkpoint
     assert train("--resume", str(run_dir), "--generations", "3") == 0
     assert [row["generation"] for row in files.read_metrics(run_dir / "metrics.csv")] == ["1", "2", "3"]
+
+
+# --- a second interrupt while a generation's files are written ------------------------------------------
+
+
+class _InterruptTwice(Reporter):
+    """Sends this process two SIGINTs as the loop tells it of generation ``at``, as an impatient user would."""
+
+    def __init__(self, at: int):
+        self.at, self.after_signals = at, []
+
+    def generation(self, row: dict) -> None:
+        if row["generation"] == self.at:
+            os.kill(os.getpid(), signal.SIGINT)
+            os.kill(os.getpid(), signal.SIGINT)
+            self.after_signals.append(row["generation"])  # still running: the second signal waits
+
+
+def test_a_second_interrupt_waits_for_the_generations_files_then_stops_at_once(tmp_path):
+    run = small_trainer(tmp_path, popsize=4, generations=5)
+    reporter = _InterruptTwice(at=2)
+    run.reporters = [reporter]
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            run.train()
+    finally:
+        run.close()
+    assert reporter.after_signals == [2]
+    assert read_checkpoint(tmp_path / "checkpoint.npz").generation == 2  # saved before the stop
+    assert [int(row["generation"]) for row in files.read_metrics(tmp_path / "metrics.csv")] == [1, 2]
+
+
+def test_outside_the_files_a_second_interrupt_stops_at_once():
+    with Interrupts() as interrupts:
+        os.kill(os.getpid(), signal.SIGINT)
+        assert interrupts.requested
+        with pytest.raises(KeyboardInterrupt):
+            os.kill(os.getpid(), signal.SIGINT)
+        with pytest.raises(KeyboardInterrupt), interrupts.held():
+            os.kill(os.getpid(), signal.SIGINT)
+            reached = True  # the block runs to its end first
+    assert reached
