@@ -22,6 +22,9 @@ import functools
 
 import gymnasium as gym
 import numpy as np
+import pybullet
+import pybullet_envs_gymnasium.gym_locomotion_envs as locomotion
+from pybullet_envs_gymnasium.robot_locomotors import WalkerBase
 
 # the walkers whose robots use WalkerBase's observation and torques; the humanoids override the torques
 FAST_IDS = ("AntBulletEnv-v0", "HalfCheetahBulletEnv-v0", "HopperBulletEnv-v0", "Walker2DBulletEnv-v0")
@@ -33,8 +36,8 @@ class _Queries:
     """What one step asks pyBullet, worked out once per reset from the robot's parts and joints."""
     joint_body: int
     joint_indices: list[int]
-    lower: np.ndarray  # joint limits, as pyBullet's Joint holds them
-    upper: np.ndarray
+    lower: np.ndarray  # joint limits, as pyBullet's Joint holds them: the lower and upper - lower
+    span: np.ndarray
     power: np.ndarray  # robot.power * joint.power_coef, per joint (float64, the stock product)
     part_links: list[tuple[int, int]]  # (body, link) of every part, in the parts dict's order
     torso: tuple[int, int]  # (body, link) of robot.robot_body
@@ -62,7 +65,8 @@ def _queries(robot) -> _Queries | None:
     base_bodies = list(dict.fromkeys(body for body, link in [*part_links, torso] if link == -1))
     return _Queries(
         joint_body=bodies.pop(), joint_indices=[joint.jointIndex for joint in joints],
-        lower=np.array([joint.lowerLimit for joint in joints]), upper=np.array([joint.upperLimit for joint in joints]),
+        lower=np.array([joint.lowerLimit for joint in joints]),
+        span=np.array([joint.upperLimit - joint.lowerLimit for joint in joints]),
         power=np.array([robot.power * joint.power_coef for joint in joints]),
         part_links=part_links, torso=torso, link_calls=link_calls, base_bodies=base_bodies,
         feet=[where(foot) for foot in robot.feet])
@@ -87,13 +91,10 @@ class FastWalker:
         return observation, info
 
     def _batchable(self) -> bool:
-        from pybullet_envs_gymnasium.gym_locomotion_envs import WalkerBaseBulletEnv
-        from pybullet_envs_gymnasium.robot_locomotors import WalkerBase
-
         robot = type(self.robot)
         same_code = (robot.calc_state is WalkerBase.calc_state and robot.apply_action is WalkerBase.apply_action
                      and type(self).step is FastWalker.step
-                     and super().step.__func__ is WalkerBaseBulletEnv.step)
+                     and super().step.__func__ is locomotion.WalkerBaseBulletEnv.step)
         # a foot's contacts are read for the whole body at once: exact while the ground is another body's base
         feet_bodies = {foot.bodies[foot.bodyIndex] for foot in self.robot.feet}
         ground_apart = all(link == -1 and body not in feet_bodies for body, link in self.ground_ids)
@@ -102,8 +103,6 @@ class FastWalker:
     def step(self, a):
         if self._plan is None:
             return super().step(a)
-        import pybullet
-
         client = self._p._client
         plan, robot = self._plan, self.robot
         # WalkerBase.apply_action: the same float64 torques, one call
@@ -142,8 +141,6 @@ class FastWalker:
     def _contacts(self, client: int) -> dict[tuple[int, int], set[tuple[int, int]]]:
         """(body, link) of each foot -> the (body, link) pairs it touches, as ``BodyPart.contact_list``
         reports them (only another body's base counts: pyBullet's filter on link B is -1)."""
-        import pybullet
-
         touching: dict[tuple[int, int], set[tuple[int, int]]] = {}
         for body in dict.fromkeys(body for body, _ in self._plan.feet):
             for point in pybullet.getContactPoints(bodyA=body, physicsClientId=client):
@@ -152,14 +149,12 @@ class FastWalker:
 
     def _calc_state(self, client: int) -> np.ndarray:
         """``WalkerBase.calc_state``, every number computed as there, from batched queries."""
-        import pybullet
-
         plan, robot = self._plan, self.robot
         joints = pybullet.getJointStates(plan.joint_body, plan.joint_indices, physicsClientId=client)
         position = np.array([joint[0] for joint in joints])
         velocity = np.array([joint[1] for joint in joints])
         scaled = np.empty((len(joints), 2))
-        scaled[:, 0] = 2 * (position - plan.lower) / (plan.upper - plan.lower) - 1.0
+        scaled[:, 0] = 2 * (position - plan.lower) / plan.span - 1.0
         scaled[:, 1] = 0.1 * velocity
         j = scaled.astype(np.float32).flatten()
         robot.joint_speeds = j[1::2]
@@ -207,9 +202,7 @@ def register() -> None:
 
 def __getattr__(name: str) -> type:
     """``envs.bullet_locomotion.AntBulletEnv`` and its kin: the fast classes, by the stock names, so
-    that entry points are strings and the classes pickle by reference."""
-    import pybullet_envs_gymnasium.gym_locomotion_envs as locomotion
-
+    that entry points are strings and the classes are found by module and name."""
     stock = getattr(locomotion, name, None)
     if not (isinstance(stock, type) and issubclass(stock, locomotion.WalkerBaseBulletEnv)):
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
