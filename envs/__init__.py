@@ -23,15 +23,15 @@ from envs.rollout import Episode, episode_rng, rollout  # noqa: E402
 from envs.settings import EnvSettings  # noqa: E402
 
 gym.logger.min_level = 40  # errors only, as the original (gym.logger.set_level(40))
-with quiet_output():
+with quiet_output():  # (importing pybullet prints its build banner from C)
     try:
         import pybullet_envs_gymnasium  # registers *BulletEnv-v0
     except ImportError:  # pyBullet is optional for users who only need Gymnasium/MuJoCo
         pybullet_envs_gymnasium = None
-if pybullet_envs_gymnasium is not None:
-    from envs import bullet_locomotion
+    if pybullet_envs_gymnasium is not None:
+        from envs import bullet_locomotion
 
-    bullet_locomotion.register()
+        bullet_locomotion.register()
 
 import envs.damaged  # noqa: E402,F401  (registers the damaged ants of Najarro & Risi 2020)
 
