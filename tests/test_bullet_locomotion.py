@@ -11,8 +11,6 @@ classes, side by side:
 - a rendered frame of the fast class equals the stock class's.
 """
 
-import importlib
-
 import gymnasium as gym
 import numpy as np
 import pybullet_envs_gymnasium.gym_locomotion_envs as locomotion
@@ -101,7 +99,8 @@ def test_ids_make_the_fast_class_and_the_stock_one(env_id, stock_id):
         assert isinstance(made.unwrapped, bullet_locomotion.FastWalker)
         assert isinstance(made.unwrapped, STOCK_CLASSES[env_id])
         made_class = type(made.unwrapped)  # found by module and name, as workers and pickle find it
-        assert getattr(importlib.import_module(made_class.__module__), made_class.__qualname__) is made_class
+        assert made_class.__module__ == bullet_locomotion.__name__
+        assert getattr(bullet_locomotion, made_class.__qualname__) is made_class
     finally:
         made.close()
     made, _ = envs.make_env(stock_id)
