@@ -1,9 +1,10 @@
 """The paper's adaptation figure (Najarro & Risi 2020): one episode, step by step.
 
 Per step: the return so far, or for ants the distance walked from the start; and for plastic networks the
-Frobenius norm of each dense layer's weights, which start random and settle within the first ~100
-steps. The data comes from ``envs.evaluation.trace_episode``; drawing uses matplotlib's Agg canvas,
-so no display is ever needed.
+Frobenius norm of each dense layer's weights, which start random in every episode. Where every update
+rescales the layers (every environment but pyBullet's) the norms stay bounded; on pyBullet's they grow
+as long as the episode runs. The data comes from ``envs.evaluation.trace_episode``; drawing uses
+matplotlib's Agg canvas, so no display is ever needed.
 """
 
 from __future__ import annotations
@@ -30,8 +31,13 @@ def steps_text(trace: Trace) -> str:
 
 
 def plot_adaptation(trace: Trace, path: str | Path) -> None:
-    """A picture of the trace (PNG, PDF or SVG, as the suffix says); drawn with matplotlib's Agg canvas, so
-    no display is ever needed."""
+    """A picture of the trace (PNG, PDF or SVG, as the suffix says)."""
+    write_figure(adaptation_figure(trace), Path(path), dpi=100)
+
+
+def adaptation_figure(trace: Trace):
+    """The trace's figure, drawn with matplotlib's Agg canvas, so no display is ever needed. Its title takes
+    two lines, the episode and its outcome, so that a long environment id stays inside the figure."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     from matplotlib.ticker import MaxNLocator
@@ -51,8 +57,8 @@ def plot_adaptation(trace: Trace, path: str | Path) -> None:
     else:
         axes[0].plot(steps, np.cumsum(trace.rewards), color="tab:blue")  # (CarRacing's per-step rewards: spikes)
         axes[0].set_ylabel("return so far")
-    axes[0].set_title(f"{trace.env_id}, seed {trace.seed}: return {trace.episode.total_return:.2f}, "
-                      f"{steps_text(trace)}")
+    axes[0].set_title(f"{trace.env_id}, seed {trace.seed}\n"
+                      f"return {trace.episode.total_return:.2f}, {steps_text(trace)}")
     if trace.layer_norms:
         norms = np.array(trace.layer_norms)
         for layer, (n_out, n_in) in enumerate(trace.layer_shapes):
@@ -62,4 +68,4 @@ def plot_adaptation(trace: Trace, path: str | Path) -> None:
         axes[1].legend(loc="best")
     axes[-1].set_xlabel("environment step" + (f" (1-{skipped}: burn-in, zero actions, not drawn)" if skipped else ""))
     axes[-1].xaxis.set_major_locator(MaxNLocator(integer=True))
-    write_figure(figure, Path(path), dpi=100)
+    return figure

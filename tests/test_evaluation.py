@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from envs import ProblemSpec, rollout
-from envs.evaluation import evaluate, format_table, trace_episode
+from envs.evaluation import Trace, evaluate, format_table, trace_episode
 from es.files import load_dat, save_dat
 from policies import PolicySettings
 
@@ -304,3 +304,25 @@ def test_an_unreadable_checkpoint_is_named_in_one_line_and_exit_2(tmp_path):
         assert refused.stderr.strip().splitlines() == [
             f"evaluate_static.py: error: cannot evaluate {kept}: {kept / 'checkpoint.npz'} is not a readable "
             "checkpoint; evaluate a weight file of the run instead"]
+
+
+def test_the_adaptation_figure_keeps_a_long_environment_id_inside_it():
+    from envs.rollout import Episode
+    from report.adaptation import adaptation_figure
+
+    steps = 960  # a damaged ant's full episode: 1000 steps, the first 40 burn-in
+    trace = Trace("AntAsymRightBulletEnv-v0", 2**31, rewards=[1.0] * steps,
+                  distances=list(np.linspace(0.0, 20.0, steps)), forward=list(np.linspace(0.0, 19.5, steps)),
+                  layer_norms=[[10.0 + t, 20.0 + t, 5.0 + t] for t in range(steps)],
+                  layer_shapes=[(128, 28), (64, 128), (8, 64)], episode=Episode(1124.75, 1000))
+    figure = adaptation_figure(trace)
+    figure.canvas.draw()
+    renderer = figure.canvas.get_renderer()
+    width, height = figure.bbox.width, figure.bbox.height
+    texts = [axes.title for axes in figure.axes] + [axes.xaxis.label for axes in figure.axes]
+    shown = [text for text in texts if text.get_text()]
+    assert any("AntAsymRightBulletEnv-v0, seed 2147483648" in text.get_text() for text in shown)
+    assert any("return 1124.75, 1000 steps, the first 40 of them burn-in" in text.get_text() for text in shown)
+    for text in shown:
+        box = text.get_window_extent(renderer)
+        assert box.x0 >= 0 and box.x1 <= width and box.y0 >= 0 and box.y1 <= height, (text.get_text(), box, width)
