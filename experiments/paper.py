@@ -167,11 +167,12 @@ def overrides(args: argparse.Namespace, *names: str) -> list[str]:
 def train_command(args: argparse.Namespace, file: Path, folder: Path) -> list[str]:
     """A new run from the experiment file, or the resume of the folder's run; on resume, the settings asked
     for are given again, so the training script refuses them where the run has others."""
-    command = [sys.executable, str(ROOT / TRAIN_SCRIPTS[args.kind])]
+    command = [sys.executable, TRAIN_SCRIPTS[args.kind]]
     previous = latest_run(ROOT / folder)  # ``folder``: relative to the repository's root, where the child runs
     if previous is not None:
-        return command + ["--resume", str(previous), *overrides(args, "seed", "popsize", "generations", "threads")]
-    return command + ["--config", str(file), "--folder", str(folder),
+        return command + ["--resume", str(shown(previous)), *overrides(args, "seed", "popsize", "generations",
+                                                                         "threads")]
+    return command + ["--config", str(shown(file)), "--folder", str(shown(folder)),
                       *overrides(args, "seed", "popsize", "generations", "threads")]
 
 
@@ -179,7 +180,9 @@ def check_training(kind: str, command: list[str]):
     """Check the training command as its script will (flags, experiment file, a resumed run's settings),
     without running it, and return the settings it would train with (a ``TrainConfig``): a UserError names the
     first problem; argparse's own errors exit with code 2. ``kind`` is one of ``TRAIN_SCRIPTS`` (the parser's
-    choices), whose script is imported for its parser."""
+    choices), whose script is imported for its parser. Its paths are read from the repository's root, where the
+    script runs."""
+    import contextlib
     import importlib
 
     from cli.train import checked_resume, config_from_args
@@ -187,9 +190,10 @@ def check_training(kind: str, command: list[str]):
 
     script = importlib.import_module(Path(TRAIN_SCRIPTS[kind]).stem)
     args = script.build_parser().parse_args(command[2:])
-    if args.resume is not None:
-        return checked_resume(kind, args)[0]
-    config = config_from_args(kind, args)
+    with contextlib.chdir(ROOT):
+        if args.resume is not None:
+            return checked_resume(kind, args)[0]
+        config = config_from_args(kind, args)
     if config.run.backend == "process" and not config.run.in_process:
         check_workers(config.run.workers)
     return config
@@ -201,7 +205,8 @@ def evaluate_command(args: argparse.Namespace, experiment: dict, run_dir: Path, 
     the best centre (from the run's best*.dat, or its checkpoint once pruned) on the same episodes, statistics
     only."""
     evaluation = experiment["evaluation"]
-    command = [sys.executable, str(ROOT / EVALUATE_SCRIPTS[args.kind]), "--environment", evaluation["environment"],
+    run_dir = shown(run_dir)
+    command = [sys.executable, EVALUATE_SCRIPTS[args.kind], "--environment", evaluation["environment"],
                "--episodes", str(args.episodes if args.episodes is not None else evaluation["episodes"]),
                "--seed", str(HELD_OUT_SEED)]
     main = KINDS[args.kind].files[0]
@@ -356,7 +361,7 @@ def reproduce(args: argparse.Namespace) -> int:
               "one first", file=sys.stderr)
         return 2
     with tempfile.TemporaryDirectory(prefix="reproduce-") as scratch:
-        command = [sys.executable, str(ROOT / TRAIN_SCRIPTS[args.kind]), "--config", str(file), "--folder", scratch,
+        command = [sys.executable, TRAIN_SCRIPTS[args.kind], "--config", str(shown(file)), "--folder", scratch,
                    *overrides(args, "seed", "popsize", "threads"), "--generations", str(args.reproduce)]
         try:
             recorded = files.read_metrics(run_dir / "metrics.csv")[:generations_done(run_dir)]

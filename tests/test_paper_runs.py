@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import os
+import shlex
 import shutil
 import subprocess
 import sys
@@ -100,6 +101,32 @@ def test_the_papers_command_gives_a_committed_runs_first_generations_again(run):
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
     assert done.stdout.strip().splitlines()[-1] == (
         f"generations 1-{count}: every column but the timings is {run.relative_to(ROOT)}'s")
+
+
+SCRIPTS = {"static": ("train_static.py", "evaluate_static.py"), "hebbian": ("train_hebb.py", "evaluate_hebb.py")}
+
+
+def test_the_commands_name_the_repositorys_files_from_its_root_and_paper_runs_from_anywhere(tmp_path):
+    """paper.py gives its children (which run in the repository's root) the root's files by paths relative to
+    it, so a command a run records (config.json, evaluation.json) runs as written in any checkout; and paper.py
+    itself runs from any directory: here a dry run from elsewhere of a finished run (its resume checked against
+    its config.json) and of a new seed (its experiment file read)."""
+    run = next(run for run in RUNS if (run / "evaluation.json").exists())
+    experiment, kind, seed = experiment_of(run)
+    train, evaluate = SCRIPTS[kind]
+    new = f"results/paper/{experiment}_{kind}_seed99"
+    for asked, expected, run_dir in (
+            (seed, ["--resume", run.relative_to(ROOT).as_posix()], run.relative_to(ROOT).as_posix()),
+            (99, ["--config", f"experiments/paper/{experiment}_{kind}.toml", "--folder", new], f"{new}/<run folder>")):
+        done = subprocess.run([sys.executable, str(ROOT / "experiments" / "paper.py"), experiment, kind, "--seed",
+                               str(asked), "--dry-run"], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+        commands = [shlex.split(line.removeprefix("$ ")) for line in done.stdout.splitlines() if line.startswith("$ ")]
+        assert [command[1] for command in commands] == [train, evaluate, evaluate]
+        assert commands[0][2:] == [*expected, "--seed", str(asked)]
+        assert commands[1][commands[1].index("--json") + 1] == f"{run_dir}/evaluation.json"
+        assert all(not word.startswith(str(ROOT)) for command in commands for word in command[1:])
+    assert not any(tmp_path.iterdir())  # a dry run writes nothing, where it runs either
 
 
 def test_reproduce_names_the_first_generation_that_differs(tmp_path):
