@@ -21,6 +21,7 @@ import pytest
 import train_hebb
 import train_static
 from cli.config import TrainConfig
+from cli.hints import EVALUATE_SCRIPTS, TRAIN_SCRIPTS
 from cli.train import config_from_args
 from es.files import read_json
 from es.runfolder import read_checkpoint
@@ -103,9 +104,6 @@ def test_the_papers_command_gives_a_committed_runs_first_generations_again(run):
         f"generations 1-{count}: every column but the timings is {run.relative_to(ROOT)}'s")
 
 
-SCRIPTS = {"static": ("train_static.py", "evaluate_static.py"), "hebbian": ("train_hebb.py", "evaluate_hebb.py")}
-
-
 def test_the_commands_name_the_repositorys_files_from_its_root_and_paper_runs_from_anywhere(tmp_path):
     """paper.py gives its children (which run in the repository's root) the root's files by paths relative to
     it, so a command a run records (config.json, evaluation.json) runs as written in any checkout; and paper.py
@@ -113,7 +111,7 @@ def test_the_commands_name_the_repositorys_files_from_its_root_and_paper_runs_fr
     its config.json) and of a new seed (its experiment file read)."""
     run = next(run for run in RUNS if (run / "evaluation.json").exists())
     experiment, kind, seed = experiment_of(run)
-    train, evaluate = SCRIPTS[kind]
+    train, evaluate = TRAIN_SCRIPTS[kind], EVALUATE_SCRIPTS[kind]
     new = f"results/paper/{experiment}_{kind}_seed99"
     for asked, expected, run_dir in (
             (seed, ["--resume", run.relative_to(ROOT).as_posix()], run.relative_to(ROOT).as_posix()),
