@@ -211,15 +211,17 @@ def versions() -> dict:
 def write_config(trainer: Trainer, config: TrainConfig, problem, command: list[str]) -> None:
     """config.json: the settings (with the noise size the run uses), then what they led to; a
     resume keeps the first command and lists its own under "resumed", and each start and resume adds the
-    machine it runs on from its generation on under "machines" (what metrics.csv's seconds were measured on)."""
+    machine it runs on from its generation on under "machines" (what metrics.csv's seconds were measured on),
+    with the package versions it has installed; "versions" beside them is the latest start's or resume's."""
     folder = trainer.folder
     earlier = folder.read_config() if (folder.path / "config.json").exists() else {}
     line = " ".join(command)
     settings = replace(config, es=trainer.es)
     data = settings.to_dict()
-    here = {"from_generation": trainer.state.generation, **machine(trainer.evaluator.workers)}
+    installed = versions()
+    here = {"from_generation": trainer.state.generation, **machine(trainer.evaluator.workers), "versions": installed}
     data.update(command=earlier.get("command", line), resumed=earlier.get("resumed", []) + ([line] if earlier else []),
-                versions=versions(), num_params=trainer.policy.num_params, layout=trainer.policy.layout.describe(),
+                versions=installed, num_params=trainer.policy.num_params, layout=trainer.policy.layout.describe(),
                 workers=trainer.evaluator.workers, wrappers=problem.wrappers(),
                 machines=earlier.get("machines", []) + [here])
     with explained("cannot start the loggers"):

@@ -51,17 +51,35 @@ def test_resumed_run_matches_an_uninterrupted_one(tmp_path, straight_run):
 
 
 def test_each_start_and_resume_records_its_machine(tmp_path):
-    """config.json's "machines": the CPU, its cores and the workers of each start and resume, from the generation
-    it began at (what metrics.csv's seconds were measured on)."""
+    """config.json's "machines": the CPU, its cores, the workers and the package versions of each start and
+    resume, from the generation it began at (what metrics.csv's seconds were measured on)."""
     assert train(*CARTPOLE, "--threads", "1", "--generations", "2", "--folder", str(tmp_path)) == 0
     run = only_run(tmp_path)
-    here = {"cpu": cpu_model(), "cores": os.cpu_count()}
+    installed = RunFolder.existing(run).read_config()["versions"]
+    assert {"python", "numpy", "gymnasium"} <= set(installed)
+    here = {"cpu": cpu_model(), "cores": os.cpu_count(), "versions": installed}
     assert RunFolder.existing(run).read_config()["machines"] == [{"from_generation": 0, **here, "workers": 1}]
     assert train("--resume", str(run), "--generations", "3", "--threads", "2") == 0
     assert RunFolder.existing(run).read_config()["machines"] == [{"from_generation": 0, **here, "workers": 1},
                                                                   {"from_generation": 2, **here, "workers": 2}]
     assert machines_text(RunFolder.existing(run).read_config()["machines"]) == (
         f"{cpu_model()}, 1 worker; {cpu_model()}, 2 workers from generation 2")
+
+
+def test_a_resume_with_other_packages_keeps_each_starts_versions(tmp_path, monkeypatch):
+    """A resume under other installed packages records its own beside the start's: the start's entry keeps
+    what it ran with, and the top-level "versions" is the resume's."""
+    import cli.train
+
+    assert train(*CARTPOLE, "--threads", "1", "--generations", "2", "--folder", str(tmp_path)) == 0
+    run = only_run(tmp_path)
+    started = RunFolder.existing(run).read_config()["versions"]
+    resumed = {key: value for key, value in started.items() if key != "torch"} | {"numpy": "0.0-test"}
+    monkeypatch.setattr(cli.train, "versions", lambda: dict(resumed))
+    assert train("--resume", str(run), "--generations", "3") == 0
+    config = RunFolder.existing(run).read_config()
+    assert [entry["versions"] for entry in config["machines"]] == [started, resumed]
+    assert config["versions"] == resumed
 
 
 def test_the_machines_of_a_run_in_words():
