@@ -6,8 +6,19 @@ its physics, and those calls cost more than the physics itself. ``FastWalker`` a
 questions in batches (the torques, the joint states, the links' states, each base's pose, the
 torso's velocity, the contacts: seven calls for the ant) and keeps every line of arithmetic of
 ``WalkerBase.calc_state``, ``WalkerBase.apply_action`` and ``WalkerBaseBulletEnv.step`` in the same
-order on the same dtypes, so observations, rewards and episode ends are bit for bit pyBullet's own
+order on the same dtypes, so observations, rewards and episode ends are pyBullet's own
 (``tests/test_bullet_locomotion.py`` steps both side by side).
+
+Its own arithmetic is the same on every CPU. pyBullet's ``calc_state`` leaves four of its operations to
+code that numpy and OpenBLAS choose by the CPU they run on: ``np.arctan2`` (numpy's AVX-512 code
+differs from the C library's in the last bit), ``np.sin`` and ``np.cos`` (the C library's on every CPU
+measured, numpy's own where it has one), ``np.linalg.norm`` of two numbers and ``np.dot`` of a 3 × 3
+matrix with a 3-vector (OpenBLAS: a fused multiply-add or not, by kernel). Here these are the C
+library's scalar ``math.atan2``, ``math.sin`` and ``math.cos``, a plain ``sqrt(dy² + dx²)``, and each
+row of the rotation as ``fma(r0, s0, r1 s1) + r2 s2`` with an exactly emulated fused multiply-add:
+the numbers pyBullet's class gives on an x86-64 CPU with AVX2 and FMA but without AVX-512 (OpenBLAS's
+Haswell and Zen kernels), whatever CPU this class runs on. On a CPU with AVX-512, or one without AVX2,
+pyBullet's own class gives other last bits, and its episodes part from these (docs/reproducibility.md).
 
 The registered ``*BulletEnv-v0`` walkers make the fast classes; ``envs.bullet_locomotion.STOCK_IDS``
 maps each to a ``*BulletStockEnv-v0`` id that makes pyBullet's own class, to check any result
@@ -19,6 +30,8 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
+from fractions import Fraction
 
 import gymnasium as gym
 import numpy as np
@@ -29,6 +42,38 @@ from pybullet_envs_gymnasium.robot_locomotors import WalkerBase
 # the walkers whose robots use WalkerBase's observation and torques; the humanoids override the torques
 FAST_IDS = ("AntBulletEnv-v0", "HalfCheetahBulletEnv-v0", "HopperBulletEnv-v0", "Walker2DBulletEnv-v0")
 STOCK_IDS = {env_id: env_id.replace("BulletEnv", "BulletStockEnv") for env_id in FAST_IDS}
+
+
+_SPLIT = 134217729.0  # 2^27 + 1: Veltkamp's split of a double into two halves of 26 bits
+_DEKKER = (2.0 ** -450, 2.0 ** 450)  # |a| and |b| in this range: Dekker's product below is exact
+
+
+def _fused(a: float, b: float, c: float) -> float:
+    """a b + c rounded once, as a CPU's fused multiply-add gives it, computed on any CPU: a b as the exact
+    sum of two doubles (Dekker 1971), the three added with one rounding (``math.fsum`` is correctly
+    rounded); outside Dekker's range, with exact fractions."""
+    product = a * b
+    low, high = _DEKKER
+    if not (low < abs(a) < high and low < abs(b) < high and math.isfinite(c)):
+        exact = Fraction(a) * Fraction(b) + Fraction(c) if math.isfinite(product) and math.isfinite(c) else 0
+        if exact == 0:
+            return product + c  # inf and nan, or a sum of zeros: as the instruction gives them
+        if abs(exact) >= 2 ** 1024:
+            return math.copysign(math.inf, exact)
+        return math.copysign(float(exact), exact)  # (a tiny sum rounds to a zero of its sign)
+    a_high = a * _SPLIT - (a * _SPLIT - a)
+    b_high = b * _SPLIT - (b * _SPLIT - b)
+    a_low, b_low = a - a_high, b - b_high
+    error = ((a_high * b_high - product) + a_high * b_low + a_low * b_high) + a_low * b_low
+    return product + c if error == 0.0 else math.fsum((product, error, c))
+
+
+def _rotated(cosine: float, sine: float, speed) -> tuple[float, float, float]:
+    """``np.dot(rot_speed, speed)`` of ``WalkerBase.calc_state``, row by row as OpenBLAS's Haswell kernel
+    sums a 3-element row: fma(r0, s0, r1 s1) + r2 s2, the last product fused too."""
+    rows = ((cosine, -sine, 0), (sine, cosine, 0), (0, 0, 1))
+    sx, sy, sz = (float(value) for value in speed)
+    return tuple(_fused(r2, sz, _fused(r0, sx, r1 * sy)) for r0, r1, r2 in rows)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -86,19 +131,34 @@ class FastWalker:
     _plan: _Queries | None = None
 
     def reset(self, seed=None, options=None):
-        observation, info = super().reset(seed=seed, options=options)
-        self._plan = _queries(self.robot) if self._batchable() else None
+        robot = self.robot
+        if self._same_code():  # the reset's state (and so its potential) with this class's arithmetic
+            robot.calc_state = lambda: self._reset_state(robot)
+        try:
+            observation, info = super().reset(seed=seed, options=options)
+        finally:
+            robot.__dict__.pop("calc_state", None)
+        self._plan = _queries(robot) if self._same_code() and self._ground_apart() else None
         return observation, info
 
-    def _batchable(self) -> bool:
+    def _reset_state(self, robot) -> np.ndarray:
+        """``robot.calc_state()`` inside pyBullet's reset, with the robot's parts as they are then (the first
+        reset's lack the floor, which later states average in, as pyBullet's own class does)."""
+        plan = _queries(robot)
+        return WalkerBase.calc_state(robot) if plan is None else self._calc_state(self._p._client, plan)
+
+    def _same_code(self) -> bool:
         robot = type(self.robot)
-        same_code = (robot.calc_state is WalkerBase.calc_state and robot.apply_action is WalkerBase.apply_action
-                     and type(self).step is FastWalker.step
-                     and super().step.__func__ is locomotion.WalkerBaseBulletEnv.step)
-        # a foot's contacts are read for the whole body at once: exact while the ground is another body's base
+        return (robot.calc_state is WalkerBase.calc_state and robot.apply_action is WalkerBase.apply_action
+                and type(self).step is FastWalker.step
+                and super().step.__func__ is locomotion.WalkerBaseBulletEnv.step)
+
+    def _ground_apart(self) -> bool:
+        """A foot's contacts are read for the whole body at once: exact while the ground is another body's
+        base (and the scene holds one robot)."""
         feet_bodies = {foot.bodies[foot.bodyIndex] for foot in self.robot.feet}
         ground_apart = all(link == -1 and body not in feet_bodies for body, link in self.ground_ids)
-        return same_code and not self.scene.multiplayer and ground_apart
+        return ground_apart and not self.scene.multiplayer
 
     def step(self, a):
         if self._plan is None:
@@ -113,7 +173,7 @@ class FastWalker:
                                            forces=torques.tolist(), physicsClientId=client)
         self.scene.global_step()
 
-        state = self._calc_state(client)
+        state = self._calc_state(client, plan)
         self._alive = float(robot.alive_bonus(state[0] + robot.initial_z, robot.body_rpy[1]))
         done = self._isDone()
         if not np.isfinite(state).all():
@@ -147,9 +207,9 @@ class FastWalker:
                 touching.setdefault((body, point[3]), set()).add((point[2], point[4]))
         return touching
 
-    def _calc_state(self, client: int) -> np.ndarray:
+    def _calc_state(self, client: int, plan: _Queries) -> np.ndarray:
         """``WalkerBase.calc_state``, every number computed as there, from batched queries."""
-        plan, robot = self._plan, self.robot
+        robot = self.robot
         joints = pybullet.getJointStates(plan.joint_body, plan.joint_indices, physicsClientId=client)
         position = np.array([joint[0] for joint in joints])
         velocity = np.array([joint[1] for joint in joints])
@@ -177,14 +237,14 @@ class FastWalker:
         if robot.initial_z is None:
             robot.initial_z = z
         r, p, yaw = robot.body_rpy
-        robot.walk_target_theta = np.arctan2(robot.walk_target_y - robot.body_xyz[1],
-                                             robot.walk_target_x - robot.body_xyz[0])
-        robot.walk_target_dist = np.linalg.norm([robot.walk_target_y - robot.body_xyz[1],
-                                                 robot.walk_target_x - robot.body_xyz[0]])
+        # the module's docstring: each operation as pyBullet's class gives it on an AVX2 CPU, on every CPU
+        dy = float(robot.walk_target_y - robot.body_xyz[1])
+        dx = float(robot.walk_target_x - robot.body_xyz[0])
+        robot.walk_target_theta = np.float64(math.atan2(dy, dx))
+        robot.walk_target_dist = np.float64(math.sqrt(dy * dy + dx * dx))
         angle_to_target = robot.walk_target_theta - yaw
-        rot_speed = np.array([[np.cos(-yaw), -np.sin(-yaw), 0], [np.sin(-yaw), np.cos(-yaw), 0], [0, 0, 1]])
-        vx, vy, vz = np.dot(rot_speed, robot.robot_body.speed())
-        more = np.array([z - robot.initial_z, np.sin(angle_to_target), np.cos(angle_to_target),
+        vx, vy, vz = _rotated(math.cos(-yaw), math.sin(-yaw), robot.robot_body.speed())
+        more = np.array([z - robot.initial_z, math.sin(angle_to_target), math.cos(angle_to_target),
                          0.3 * vx, 0.3 * vy, 0.3 * vz, r, p], dtype=np.float32)
         return np.clip(np.concatenate([more, j, robot.feet_contact]), -5, +5)
 

@@ -41,8 +41,10 @@ POLL = 0.5  # seconds between looks at the child and at metrics.csv
 SAFETY = 1.15  # a generation may take this much longer than the last one did
 EVALUATION = EVALUATIONS["evaluation"]  # the final centre's evaluation: the run's result
 BEST_EVALUATION = EVALUATIONS["evaluation_best"]  # the best centre's (the checkpoint keeps it), beside it
-# what a run folder keeps between chunks: what continuing needs, and what evaluating wrote
-KEPT = ("config.json", "checkpoint.npz", "metrics.csv", EVALUATION, BEST_EVALUATION, "adaptation.png", "frames.png")
+MADE_WITH = "made_with.json"  # a run made by older code: the commit and the CPUs whose generations it reproduces
+# what a run folder keeps between chunks: what continuing needs, what evaluating wrote, and its label
+KEPT = ("config.json", "checkpoint.npz", "metrics.csv", EVALUATION, BEST_EVALUATION, "adaptation.png", "frames.png",
+        MADE_WITH)
 FINAL_WEIGHTS = "last*.dat"  # kept once training is complete: the weights evaluated and shipped
 
 

@@ -390,10 +390,23 @@ def reproduce(args: argparse.Namespace) -> int:
         columns = [f"{column} {row.get(column)} here, {value} in the run" for column, value in theirs.items()
                    if column not in TIMINGS and row.get(column) != value]
         if columns:
-            say(f"generation {theirs['generation']} differs from {shown(run_dir)}: {'; '.join(columns)}")
+            say(f"generation {theirs['generation']} differs from {shown(run_dir)}: {'; '.join(columns)}"
+                + made_with_note(run_dir))
             return 1
     say(f"generations 1-{args.reproduce}: every column but the timings is {shown(run_dir)}'s")
     return 0
+
+
+def made_with_note(run_dir: Path) -> str:
+    """For a run made by older code (its ``made_with.json``): where its generations come again."""
+    from es import files
+
+    try:
+        label = files.read_json(run_dir / campaign.MADE_WITH)
+        return (f" (the run was made by the code at commit {label['commit'][:12]}, and reproduces with it on "
+                f"{label['reproduces_on']}: see its {campaign.MADE_WITH})")
+    except (OSError, ValueError, TypeError, KeyError):
+        return ""
 
 
 def experiment_main(args: argparse.Namespace, deadline: float | None) -> int:
