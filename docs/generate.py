@@ -344,8 +344,9 @@ def report(experiment: str, environment: str, page: Path, runs: Path = RUNS,
            planned: dict[str, set[str]] | None = None) -> str:
     """The campaign's report of ``experiment`` on ``environment`` (``experiments/paper.py EXPERIMENT report``, in
     ``runs``): each kind's IQM and mean with their 95 % bootstrap intervals, and P(Hebbian > static), linked to
-    the report. Pending until the report holds every run the campaign plans for the experiment (``planned``:
-    folder names per kind), so that a page shows the campaign's final comparison, never a part of it."""
+    the report, and how many of the runs the campaign plans for the experiment (``planned``: folder names per
+    kind) are still to come. Pending until each kind has an evaluated run and the report holds every evaluated
+    one, so that a page never shows a report older than the runs."""
     folder = report_folder(runs, experiment) / environment
     planned = campaign_folders(experiment) if planned is None else planned
     try:
@@ -357,8 +358,10 @@ def report(experiment: str, environment: str, page: Path, runs: Path = RUNS,
         return REPORT_PENDING
     except (KeyError, IndexError):
         raise FigureError(f"{experiment}: {folder / 'scores.csv'} names no runs") from None
-    if not planned or not all(names <= reported for names in planned.values()):
+    done = {kind: {name for name in names if evaluated(name, runs)} for kind, names in planned.items()}
+    if not planned or not all(done.values()) or not all(names <= reported for names in done.values()):
         return REPORT_PENDING
+    to_come = sum(len(names) for names in planned.values()) - sum(len(names) for names in done.values())
 
     def interval(row: dict, low: str, high: str, single: bool, show=number) -> str:
         # a group of one run has no interval: every resample is that run (report/stats.py's markdown)
@@ -382,8 +385,9 @@ def report(experiment: str, environment: str, page: Path, runs: Path = RUNS,
     over = (f"{min(sizes)} run{'s' if min(sizes) > 1 else ''} of each kind" if len(sizes) == 1 else
             "runs of " + ", ".join(f"{group}: {count}" for group, count in counts.items()))
     over += " (95 % bootstrap intervals)" if max(sizes) > 1 else ""
+    later = f"; {to_come} more run{'s' if to_come > 1 else ''} of the campaign to come" if to_come else ""
     return f"over {over}: {'; '.join(cells)}; {better} ([the report]" \
-           f"({link(folder / 'summary.md', page)}))"
+           f"({link(folder / 'summary.md', page)})){later}"
 
 
 def render_results(text: str, page: Path, runs: Path = RUNS, behind: list[str] | None = None) -> str:

@@ -713,22 +713,30 @@ def test_a_campaign_result_not_yet_evaluated_is_pending_and_a_late_page_is_behin
     assert generate.PENDING not in generate.render_results(written, page, tmp_path)  # a rewrite fills it in
 
 
-def test_the_campaigns_report_is_rendered_once_every_planned_run_is_in(tmp_path):
+def test_the_campaigns_report_is_rendered_once_every_evaluated_run_is_in(tmp_path):
     """<!-- report:EXPERIMENT ENVIRONMENT -->: the files experiments/paper.py's report writes (report/stats.py's
-    own CSV writer here), pending until the report holds every run the campaign plans, then each kind's IQM
-    and mean with their intervals and P(Hebbian > static)."""
+    own CSV writer here), pending until each kind has an evaluated run and the report holds every evaluated run
+    the campaign plans, then each kind's IQM and mean with their intervals, P(Hebbian > static), and how many
+    planned runs are still to come."""
     from dataclasses import asdict, replace
 
     from report import stats
 
     assert generate.campaign_folders("carracing") == {
-        kind: {f"carracing_{kind}_seed{seed}" for seed in (1, 2, 3)} for kind in ("hebbian", "static")}
+        kind: {f"carracing_{kind}_seed{seed}" for seed in (1, 2, 3, 4, 5)} for kind in ("hebbian", "static")}
     page = ROOT / "README.md"
     folder = tmp_path / "carracing_report" / "CarRacing-v3"
-    planned = {kind: {f"carracing_{kind}_seed{seed}" for seed in (1, 2)} for kind in ("static", "hebbian")}
+    planned = {kind: {f"carracing_{kind}_seed{seed}" for seed in (1, 2, 3)} for kind in ("static", "hebbian")}
 
     def rendered() -> str:
         return generate.report("carracing", "CarRacing-v3", page, tmp_path, planned)
+
+    def evaluate(*names: str) -> None:
+        for name in names:
+            run = tmp_path / name / "20261201-000000_CarRacing-v0"
+            run.mkdir(parents=True)
+            (run / "checkpoint.npz").write_bytes(b"")  # (a run folder is one with a checkpoint)
+            (run / "evaluation.json").write_text("{}")
 
     assert rendered() == generate.REPORT_PENDING  # no report yet
     folder.mkdir(parents=True)
@@ -745,16 +753,21 @@ def test_the_campaigns_report_is_rendered_once_every_planned_run_is_in(tmp_path)
                                                             "score": 1.0} for name in folders]))
 
     scores("carracing_static_seed1", "carracing_hebbian_seed1", "carracing_hebbian_seed2")
-    assert rendered() == generate.REPORT_PENDING  # static seed 2 is not in yet
+    assert rendered() == generate.REPORT_PENDING  # no run evaluated yet
+    evaluate("carracing_static_seed1", "carracing_static_seed2", "carracing_hebbian_seed1", "carracing_hebbian_seed2")
+    assert rendered() == generate.REPORT_PENDING  # static seed 2 is evaluated, but not in the report yet
     scores("carracing_static_seed1", "carracing_static_seed2", "carracing_hebbian_seed1", "carracing_hebbian_seed2")
     summary = os.path.relpath(folder / "summary.md", page.parent)
     assert rendered() == ("over 2 runs of each kind (95 % bootstrap intervals): static IQM **840** [830, 850], mean "
                           "**841** [829, 853]; Hebbian IQM **867** [860, 874], mean **867** [860, 874]; "
-                          f"P(Hebbian > static) **0.75** [0.25, 1.00] ([the report]({summary}))")
+                          f"P(Hebbian > static) **0.75** [0.25, 1.00] ([the report]({summary})); 2 more runs of the "
+                          "campaign to come")
+    evaluate("carracing_static_seed3")
+    assert rendered() == generate.REPORT_PENDING  # evaluated since the report was written
     written = f"<!-- report:carracing CarRacing-v3 -->{generate.REPORT_PENDING}<!-- end report -->"
-    behind = []  # the campaign's own plan, seeds 1-3, is not complete in this report: still pending, not behind
+    behind = []  # the campaign's own plan's runs are not in tmp_path: still pending, not behind
     assert generate.render_results(written, page, tmp_path, behind) == written and behind == []
-    # one run per kind: no interval (every resample is that run), as the report itself says
+    # one run per kind, every planned one in: no interval (every resample is that run), as the report itself says
     planned = {kind: {f"carracing_{kind}_seed1"} for kind in ("static", "hebbian")}
     (folder / "summary.csv").write_text(stats.csv_text([asdict(replace(summary, runs=1)) for summary in summaries]))
     assert rendered() == ("over 1 run of each kind: static IQM **840** (no interval: 1 run), mean **841** (no "
