@@ -290,7 +290,10 @@ def main(argv: list[str] | None = None) -> int:
     from report.stats import improvements, summarise
 
     logging.getLogger("evotorch").setLevel(logging.WARNING)
-    record = Record(f"vs_evotorch-{args.environment}", ("evotorch", "rliable"), timed=False)
+    # the record's name is its command's: the rows asked for, where they are not the default ones
+    rows = [value for value, default in ((args.strategies, "snes,pgpe"), (args.settings, ",".join(SETTINGS)))
+            if value != default]
+    record = Record("-".join(["vs_evotorch", args.environment, *rows]), ("evotorch", "rliable"), timed=False)
     sized = ProblemSpec((args.environment,)).build()
     dim = sized.policy.num_params
     sized.close()

@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import glob
 import importlib
 import os
 import re
@@ -148,16 +149,26 @@ def number(value: float) -> str:
         else f"{value:.3f}"
 
 
+STAMPED = re.compile(r"-\d{8}T\d{6}Z\.json$")  # a record's file name: its command's name, then when it was taken
+
+
 def published(name: str, results: Path) -> tuple[Path, dict]:
-    """The record ``name`` and its path; FigureError where there is none or it is marked loaded."""
-    path = results / f"{name}.json"
-    if not path.is_file():
-        raise FigureError(f"{name}: no record {path.relative_to(ROOT) if path.is_relative_to(ROOT) else path}")
-    record = records.read(path)
-    if record["loaded"]:
-        raise FigureError(f"{name}: taken at load {max(record['load_before'], record['load_after']):.2f} on "
-                          f"{record['cores']} cores (loaded); measure again on a quiet machine")
-    return path, record
+    """The newest record of the command ``name`` (``results/<name>-<time>.json``) not taken on a loaded machine, and
+    its path; FigureError where there is none. A page names the command, never one record: a new record of it
+    renders everywhere the figure appears."""
+    stamped = sorted(path for path in results.glob(f"{glob.escape(name)}-*.json")
+                     if STAMPED.search(path.name) and path.name[:len(name)] == name
+                     and not STAMPED.sub("", path.name[len(name):]))
+    where = results.relative_to(ROOT) if results.is_relative_to(ROOT) else results
+    if not stamped:
+        raise FigureError(f"{name}: no record {where}/{name}-<time>.json")
+    for path in reversed(stamped):
+        record = records.read(path)
+        if not record["loaded"]:
+            return path, record
+    raise FigureError(f"{name}: every record was taken on a loaded machine (the newest at load "
+                      f"{max(record['load_before'], record['load_after']):.2f} on {record['cores']} cores); "
+                      "measure again on a quiet machine")
 
 
 def figure(name: str, measure: str, page: Path, results: Path = records.RESULTS) -> str:

@@ -568,14 +568,15 @@ def test_no_speed_figure_is_typed_into_a_page():
         "\n".join(typed))
 
 
-def a_record(folder: Path, name: str, loaded: bool = False, rounds: int = 5) -> Path:
-    values = [9.0 + 0.1 * index for index in range(rounds)]
+def a_record(folder: Path, name: str, loaded: bool = False, rounds: int = 5, taken: str = "20260101T000000Z",
+             first: float = 9.0) -> Path:
+    values = [first + 0.1 * index for index in range(rounds)]
     measure = {"what": "a ratio", "unit": "x", "values": values, "median": values[len(values) // 2], "min": values[0],
                "max": values[-1], "rounds": rounds}
     body = {"command": "python benchmarks/x.py", "commit": "0" * 12, "date": "2026-01-01T00:00:00+00:00",
             "cpu": "AMD EPYC", "cores": 2, "versions": {}, "load_before": 3.5 if loaded else 0.2, "load_after": 0.3,
             "loaded": loaded, "measures": {"env_step": measure}, "notes": {}}
-    path = folder / f"{name}.json"
+    path = folder / f"{name}-{taken}.json"
     path.write_text(json.dumps(body))
     return path
 
@@ -585,10 +586,22 @@ def test_a_figure_is_rendered_from_its_record_and_checked(tmp_path):
     page = ROOT / "docs" / "speed.md"
     text = "stepped <!-- figure:quiet env_step -->10×<!-- end figure --> faster"
     rendered = generate.render_figures(text, page, tmp_path)
-    link = os.path.relpath(tmp_path / "quiet.json", page.parent)
+    link = os.path.relpath(tmp_path / "quiet-20260101T000000Z.json", page.parent)
     assert rendered == f"stepped <!-- figure:quiet env_step -->[9.20× (9.00–9.40), AMD EPYC, 2 cores]({link})" \
                        "<!-- end figure --> faster"
     assert generate.render_figures(rendered, page, tmp_path) == rendered  # the check the pages pass
+
+
+def test_a_figure_is_its_commands_newest_record_taken_on_a_quiet_machine(tmp_path):
+    """A page names a record's command, not one record: a newer record of it renders there; a newer one taken on
+    a loaded machine does not; a record of another command whose name begins the same is another command's."""
+    page = ROOT / "docs" / "speed.md"
+    a_record(tmp_path, "quiet")
+    a_record(tmp_path, "quiet", taken="20260301T000000Z", first=7.0)
+    a_record(tmp_path, "quiet", taken="20260401T000000Z", first=5.0, loaded=True)
+    a_record(tmp_path, "quiet-scaling", taken="20260501T000000Z", first=3.0)
+    rendered = generate.render_figures("<!-- figure:quiet env_step --><!-- end figure -->", page, tmp_path)
+    assert "[7.20× (7.00–7.40), AMD EPYC, 2 cores](" in rendered and "quiet-20260301T000000Z.json)" in rendered
 
 
 @pytest.mark.parametrize(("kind", "message"), [("loaded", "loaded"), ("short", "3 rounds"), ("missing", "no record"),
@@ -617,7 +630,7 @@ def test_a_records_table_is_rendered_with_its_intervals_and_machine(tmp_path):
     a_table_record(tmp_path, "solve")
     page = ROOT / "docs" / "strategies.md"
     text = "<!-- table:solve results -->\nold\n<!-- end table -->"
-    link = os.path.relpath(tmp_path / "solve.json", page.parent)
+    link = os.path.relpath(tmp_path / "solve-20260101T000000Z.json", page.parent)
     assert generate.render_figures(text, page, tmp_path) == (
         "<!-- table:solve results -->\n| row | population | budget | σ | steps | P |\n|---|---|---|---|---|---|\n"
         "| snes | 64 | 1,000,000 | 0.024 | 20,513 [15,870, 26,011] | 0.62 [0.40, 0.85] |\n\n"
@@ -835,3 +848,11 @@ def test_no_command_outside_a_code_block():
 
 if __name__ == "__main__":
     serve()
+
+
+def test_pages_name_a_records_command_not_one_record():
+    """A figure or table marker names the command whose newest record it renders (``figure:car_racing ...``), never
+    one record by its time (``car_racing-20261127T223326Z``), so a new record updates every page that shows it."""
+    stamped = re.compile(r"<!-- (?:figure|table):[\w.-]*-\d{8}T\d{6}Z ")
+    pages = [ROOT / "README.md", ROOT / "experiments" / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    assert [page.name for page in pages if stamped.search(page.read_text())] == []
