@@ -131,8 +131,9 @@ def checked_resume(kind: str, args: argparse.Namespace) -> tuple[TrainConfig, Ru
     """The run's recorded settings, with the flags given: only the resumable ones may differ; the
     checkpoint is checked against config.json before anything is written."""
     folder = RunFolder.existing(args.resume)
+    recorded = folder.read_config()
     try:
-        config = TrainConfig.from_dict(folder.read_config(), "config.json")
+        config = TrainConfig.from_dict(recorded, "config.json")
     except (ValueError, TypeError) as error:
         raise UserError(f"--resume {folder.path}: unreadable config.json ({error})") from None
     if config.policy.kind != kind:
@@ -149,6 +150,10 @@ def checked_resume(kind: str, args: argparse.Namespace) -> tuple[TrainConfig, Ru
                         f"{', '.join(item.label for item in resumable)} may change): start a new run instead") from None
     except ValueError as error:  # a resumable value out of range
         raise UserError(str(error)) from None
+    unused = unmet_requirement(declared(), {item.name: resumed.value(item.name) for item in declared()}, flags)
+    if unused is not None:  # --mlflow_uri for a run that logs to no MLflow: refused as a new run refuses it
+        raise UserError(f"--resume {args.resume}: {unused}")
+    check_history(recorded, folder.path / "config.json")
     checkpoint = folder.check_resumable(config.es, config.policy.obs_norm)  # against config.json, before any write
     # only plain module names outside the standard library are imported
     imports = resume_imports(config.env.env_ids, config.env.recipe_modules, str(folder.path / "config.json"))
@@ -161,6 +166,31 @@ def checked_resume(kind: str, args: argparse.Namespace) -> tuple[TrainConfig, Ru
     if imports:
         say(imports)
     return resumed, folder
+
+
+# what config.json records of the run's history beside its settings: (its JSON type, of entries of that type, in
+# words); a resume adds its command and its machine to them
+HISTORY = {"command": (str, None, "a string"), "resumed": (list, str, "a list of commands (strings)"),
+           "machines": (list, dict, "a list of the machines it ran on (objects)")}
+JSON_TYPES = {dict: "an object", list: "a list", str: "a string", bool: "true or false", int: "a number",
+              float: "a number", type(None): "null"}
+
+
+def check_history(recorded: dict, path: Path) -> None:
+    """Refuse a config.json whose record of the run's history is not of its type (a hand-edited file): a resume
+    would have to drop it, or fail halfway."""
+    for key, (kind, entry, expected) in HISTORY.items():
+        if key not in recorded:
+            continue
+        value = recorded[key]
+        if not isinstance(value, kind):
+            found = JSON_TYPES.get(type(value), "another value")
+        elif entry is not None and any(not isinstance(item, entry) for item in value):
+            found = f"a list holding {JSON_TYPES.get(type(next(i for i in value if not isinstance(i, entry))))}"
+        else:
+            continue
+        raise UserError(f"--resume {path.parent}: {path.name}'s \"{key}\" must be {expected}, got {found}; put "
+                        f"{path.name} back as it was, or start a new run")
 
 
 def edited_settings(checkpoint: Checkpoint, config: TrainConfig) -> list[str]:
@@ -300,6 +330,8 @@ def train_main(kind: str, parser: Parser, argv: list[str] | None = None) -> int:
     finally:
         if trainer is not None:
             trainer.close()
+            if args.resume is None:  # a new run whose loggers failed to start: no folder left behind
+                trainer.folder.remove_unstarted()
         release_locks()  # the run folder's lock, for the next run in this process
 
 

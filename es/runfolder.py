@@ -215,11 +215,24 @@ class RunFolder:
         if all(path.name == LOCK_FILE for path in self.path.iterdir()):
             (self.path / LOCK_FILE).unlink(missing_ok=True)
             self.path.rmdir()
-            for parent in self.made_parents:  # innermost first; one another process has used meanwhile stays
-                try:
-                    parent.rmdir()
-                except OSError:
-                    break
+            self._remove_made_parents()
+
+    def remove_unstarted(self) -> None:
+        """Remove a folder this process created for a run that never started (its config.json was never
+        written): its lock and what a logger wrote there while failing to start (MLflow's database, W&B's
+        folder); and the folders above it that creating it made."""
+        if (self.path / "config.json").exists():
+            return
+        shutil.rmtree(self.path, ignore_errors=True)
+        if not self.path.exists():
+            self._remove_made_parents()
+
+    def _remove_made_parents(self) -> None:
+        for parent in self.made_parents:  # innermost first; one another process has used meanwhile stays
+            try:
+                parent.rmdir()
+            except OSError:
+                break
 
     def check_resumable(self, es: ESSettings, obs_norm: bool) -> Checkpoint:
         """Refuse, reading only, a checkpoint that does not fit the settings of config.json or its own

@@ -15,7 +15,9 @@ import contextlib
 import io
 import json
 import math
+import os
 import shutil
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -27,6 +29,7 @@ from es.files import METRICS_COLUMNS, read_metrics
 from tests.extras import need
 from tests.run_helpers import only_run
 
+ROOT = Path(__file__).resolve().parent.parent
 CARTPOLE = ("--environment", "CartPole-v1", "--popsize", "4", "--seed", "3", "--threads", "1")
 
 
@@ -211,3 +214,72 @@ def test_an_mlflow_run_missing_from_the_store_is_refused_in_one_line(tmp_path, m
     assert code == 2 and output.strip().splitlines()[-1] == (
         f"train_static.py: error: --logger mlflow: the MLflow run {run_id} that config.json records is not in {other}; "
         "give --mlflow_uri the store it was logged to"), output
+
+
+# --- a tracker that cannot be reached or written: one line, within a bound, no run folder left -------------
+
+
+def closed_port() -> int:
+    """A local port nothing listens on (one the system just gave and took back)."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def train_process(*argv, env: dict | None = None, timeout: float = 60) -> subprocess.CompletedProcess:
+    """train_static.py as a process that must end within ``timeout`` seconds (the trackers' own retries take
+    minutes; the bound the tool states is 5 s of waiting, this one is loose for a loaded machine)."""
+    environ = {key: value for key, value in os.environ.items() if not key.startswith(("WANDB_", "MLFLOW_"))}
+    return subprocess.run([sys.executable, str(ROOT / "train_static.py"), *map(str, argv)], cwd=ROOT,
+                          env={**environ, "SDL_VIDEODRIVER": "dummy", "NETRC": os.devnull, **(env or {})},
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def unwritable_database(tmp_path: Path) -> str:
+    """A SQLite URI no file can be created at, whoever runs the test (root too): a folder of /sys."""
+    return "sqlite:////sys/mlflow.db" if Path("/sys").is_dir() else f"sqlite:///{tmp_path / 'a file' / 'mlflow.db'}"
+
+
+@pytest.mark.parametrize("store, problem", [
+    (lambda tmp_path: f"http://127.0.0.1:{closed_port()}", "nothing answers there"),
+    (lambda tmp_path: f"http://user:secret@127.0.0.1:{closed_port()}", "nothing answers there"),
+    (unwritable_database, "the database cannot be opened"),
+])
+def test_an_mlflow_store_that_cannot_be_reached_or_written_fails_at_once_in_one_line(tmp_path, store, problem):
+    need("mlflow")
+    (tmp_path / "a file").write_text("")
+    uri = store(tmp_path)
+    done = train_process(*CARTPOLE, "--generations", 1, "--folder", tmp_path / "runs", "--logger", "mlflow",
+                         "--mlflow_uri", uri)
+    (line,) = done.stderr.strip().splitlines()
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    assert line.startswith(f"train_static.py: error: --logger mlflow: --mlflow_uri {uri.replace('secret', '***')}: "
+                           f"{problem}"), line
+    assert "secret" not in line
+    assert not (tmp_path / "runs").exists()  # the run never started: no folder left behind
+
+
+def test_a_wandb_server_that_does_not_answer_fails_at_once_in_one_line(tmp_path):
+    need("wandb")
+    base = f"http://127.0.0.1:{closed_port()}"
+    done = train_process(*CARTPOLE, "--generations", 1, "--folder", tmp_path / "runs", "--logger", "wandb",
+                         env={"WANDB_MODE": "online", "WANDB_API_KEY": "0" * 40, "WANDB_BASE_URL": base})
+    assert done.returncode == 2 and done.stderr.strip() == (
+        f"train_static.py: error: --logger wandb: the W&B server {base} (WANDB_BASE_URL) does not answer (Connection "
+        "refused); log offline with WANDB_MODE=offline, or give the address of a server that runs"), done.stderr
+    assert not (tmp_path / "runs").exists()
+
+
+def test_a_resume_whose_tracker_cannot_be_reached_changes_nothing(tmp_path, monkeypatch):
+    need("mlflow")
+    monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
+    code, output = main(*CARTPOLE, "--generations", 1, "--folder", tmp_path / "runs")
+    assert code == 0, output
+    run = only_run(tmp_path / "runs")
+    before = {path.name: path.read_bytes() for path in run.iterdir() if path.is_file()}
+    uri = f"http://127.0.0.1:{closed_port()}"
+    done = train_process("--resume", run, "--generations", 2, "--logger", "mlflow", "--mlflow_uri", uri)
+    assert done.returncode == 2 and done.stderr.strip() == (
+        f"train_static.py: error: --logger mlflow: --mlflow_uri {uri}: nothing answers there (Connection refused); "
+        "start the tracking server, or give the URI of one that runs"), done.stderr
+    assert {path.name: path.read_bytes() for path in run.iterdir() if path.is_file()} == before

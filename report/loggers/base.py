@@ -26,14 +26,17 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import socket
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
+from urllib.parse import urlsplit
 
 from es.files import METRICS_COLUMNS
 
 GROUP = "experiment trackers (--logger)"  # --help's group of the loggers' flags
+REACH_SECONDS = 5  # the longest a tracker may take to answer as the run starts (docs/flags.md)
 
 
 @dataclass(frozen=True)
@@ -86,3 +89,22 @@ def scalars(row: dict, extra_columns: tuple[str, ...] = ()) -> dict[str, float]:
         if math.isfinite(value):
             found[name] = value
     return found
+
+
+def unreachable(url: str, default_port: int) -> str | None:
+    """Why nothing answers at ``url``'s host and port within ``REACH_SECONDS`` (a TCP connection), or None if
+    something does: a tracker's own client retries an unreachable server for minutes before it says so."""
+    parts = urlsplit(url)
+    try:
+        port = parts.port or default_port
+    except ValueError:  # Python's words for a port out of range or not a number
+        return "its port is not a whole number from 1 to 65535"
+    if not parts.hostname:
+        return "it names no host"
+    try:
+        socket.create_connection((parts.hostname, port), timeout=REACH_SECONDS).close()
+    except TimeoutError:
+        return f"no answer within {REACH_SECONDS} s"
+    except OSError as error:
+        return error.strerror or str(error)
+    return None

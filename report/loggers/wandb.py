@@ -10,6 +10,10 @@ Online or offline: ``WANDB_MODE`` when it is set; otherwise online where a login
 offline where none is, the files under ``<run folder>/wandb``, to upload later with ``wandb sync``
 (each process of a resumed run writes its own offline folder, all of the same run id). W&B's own
 console output, code saving and system statistics are off: the run's output stays the project's.
+
+An online run whose server nothing answers at (``WANDB_BASE_URL``'s host) stops the run's start within
+``REACH_SECONDS``, in one line naming it; W&B itself would wait ``init_timeout`` (90 s). A ``WANDB_MODE``
+that W&B has no such mode for is refused, naming the modes.
 """
 
 from __future__ import annotations
@@ -21,11 +25,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import urlparse
 
-from report.loggers.base import GROUP, LoggerEntry, LoggerSettings
+from report.loggers.base import GROUP, LoggerEntry, LoggerSettings, unreachable
 from settings import setting
 
 WITH_WANDB = ("logger", "wandb")  # what its settings require
 DEFAULT_HOST = "https://api.wandb.ai"
+MODES = ("online", "offline", "disabled", "shared", "dryrun", "run")  # WANDB_MODE's values (wandb.Settings.mode)
+ONLINE = ("online", "shared", "run")  # those that reach the server
 
 
 @dataclass(frozen=True)
@@ -47,6 +53,20 @@ def logged_in() -> bool:
         return False
 
 
+def check_mode(mode: str) -> None:
+    """Refuse a ``WANDB_MODE`` W&B has no such mode for, and an online run whose server nothing answers at."""
+    if mode not in MODES:
+        raise ValueError(f"WANDB_MODE={mode}: W&B has no such mode; give one of {', '.join(MODES[:3])} (or leave "
+                         "WANDB_MODE unset: online with a login, else offline)")
+    if mode not in ONLINE:
+        return
+    base = os.environ.get("WANDB_BASE_URL", DEFAULT_HOST)
+    reason = unreachable(base, 443 if urlparse(base).scheme == "https" else 80)
+    if reason is not None:
+        raise ValueError(f"the W&B server {base} (WANDB_BASE_URL) does not answer ({reason}); log offline with "
+                         "WANDB_MODE=offline, or give the address of a server that runs")
+
+
 class WandbLogger:
     def __init__(self, settings: WandbSettings, run_folder: Path, say=print):
         self.settings, self.folder, self.say = settings, Path(run_folder), say
@@ -58,6 +78,7 @@ class WandbLogger:
 
         run_id = self.settings.wandb_run_id or secrets.token_hex(4)
         mode = None if "WANDB_MODE" in os.environ else "online" if logged_in() else "offline"
+        check_mode(mode or os.environ["WANDB_MODE"])
         self.run = wandb.init(project=self.settings.wandb_project, id=run_id, resume="allow", dir=str(self.folder),
                               name=self.folder.name, mode=mode,
                               settings=wandb.Settings(silent=True, console="off", save_code=False,
