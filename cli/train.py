@@ -186,7 +186,8 @@ def check_history(recorded: dict, path: Path) -> None:
         if not isinstance(value, kind):
             found = JSON_TYPES.get(type(value), "another value")
         elif entry is not None and any(not isinstance(item, entry) for item in value):
-            found = f"a list holding {JSON_TYPES.get(type(next(i for i in value if not isinstance(i, entry))))}"
+            other = next(item for item in value if not isinstance(item, entry))
+            found = f"a list holding {JSON_TYPES.get(type(other), 'another value')}"
         else:
             continue
         raise UserError(f"--resume {path.parent}: {path.name}'s \"{key}\" must be {expected}, got {found}; put "
