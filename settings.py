@@ -166,6 +166,18 @@ def _of_type(value, hint) -> bool:
     return isinstance(value, hint)
 
 
+def file_value(item: Option, value):
+    """A value of an experiment file: TOML has no null, so where the flag takes ``none`` for no value
+    (``optional_float``), the file's string "none" is no value too."""
+    if isinstance(value, str) and item.spec.parse is not None and type(None) in _union(item.hint):
+        try:
+            if item.spec.parse(value) is None:
+                return None
+        except (TypeError, ValueError):
+            pass
+    return value
+
+
 def type_problem(item: Option, value) -> str | None:
     """What is wrong with the type of ``value`` (a file can hold anything: ``reservoir = "false"``)."""
     if any(_of_type(value, hint) for hint in _union(item.hint)):

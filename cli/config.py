@@ -23,7 +23,7 @@ from envs import EnvSettings
 from es.settings import ESSettings, RunSettings
 from policies import KINDS, PolicySettings
 from report.loggers import LogSettings
-from settings import Option, contradictions, options, type_problem
+from settings import Option, contradictions, file_value, options, type_problem
 
 SECTIONS = {"es": ESSettings, "policy": PolicySettings, "env": EnvSettings, "run": RunSettings, "log": LogSettings}
 LATER_SECTIONS = ("log",)  # absent from the config.json of earlier versions (their loggers: RETIRED's run.tensorboard)
@@ -66,6 +66,9 @@ class TrainConfig:
     def from_dict(cls, data: dict, source: str = "config.json") -> TrainConfig:
         """A run's config.json: every section, every key known; keys outside the sections are information
         (versions, the command, the layout). A flat object (config.json before sections) is read as it was."""
+        if not isinstance(data, dict):
+            raise ValueError(f"{source} is not a JSON object; a run's config.json holds the sections "
+                             f"{', '.join(SECTIONS)} in one object")
         if "es" not in data and "kind" in data:
             known = {item.name for item in declared()}
             return cls.from_values({key: value for key, value in data.items() if key in known}, source)
@@ -158,7 +161,7 @@ def section_values(sections: dict, source: str, kind: str | None = None, recorde
                 if not recorded or value != item.default:
                     foreign.append(f"{name}.{key} ({item.label}, for {' and '.join(item.spec.applies)} runs)")
             else:
-                flat[key] = value
+                flat[key] = value if recorded else file_value(item, value)
     if unknown:
         raise ValueError(f"{source}: unknown settings {', '.join(unknown)}")
     if foreign:

@@ -271,7 +271,7 @@ def recorded_config(kind: str, weight_file: Path) -> TrainConfig | None:
     if not path.is_file():
         return None
     try:
-        config = TrainConfig.from_dict(read_json(path), str(path))
+        config = TrainConfig.from_dict(read_json(path), path.name)
     except (ValueError, TypeError) as error:
         raise UserError(f"{path}: unreadable ({error})") from None
     if config.policy.kind != kind:

@@ -226,6 +226,22 @@ def test_an_experiment_file_key_the_script_does_not_take_is_refused(tmp_path, mo
     assert sorted(path.name for path in tmp_path.iterdir()) == ["x.toml"]
 
 
+def test_an_experiment_file_says_none_where_the_flag_takes_none(tmp_path):
+    """TOML has no null: where a flag takes ``none`` (--pgpe_max_sigma_change none: no limit), the file's
+    string "none" means the same; elsewhere a string stays a value of the wrong type."""
+    experiment = tmp_path / "x.toml"
+    experiment.write_text('[es]\nstrategy = "pgpe"\npgpe_max_sigma_change = "none"\n')
+    assert TrainConfig.from_toml(experiment).value("pgpe_max_sigma_change") is None
+    experiment.write_text('[es]\nstrategy = "pgpe"\npgpe_max_sigma_change = "None"\n')
+    assert TrainConfig.from_toml(experiment).value("pgpe_max_sigma_change") is None
+    for text, problem in (('pgpe_max_sigma_change = "nothing"', "--pgpe_max_sigma_change must be a number or none, "
+                                                                  "got 'nothing'"),
+                          ('popsize = "none"', "--popsize must be a whole number, got 'none'")):
+        experiment.write_text(f'[es]\nstrategy = "pgpe"\n{text}\n')
+        with pytest.raises(ValueError, match=problem):
+            TrainConfig.from_toml(experiment)
+
+
 def test_a_setting_of_another_kind_is_not_a_flag_of_the_script(tmp_path):
     code, _, err = main(train_static, "--environment", "CartPole-v1", "--hebb_rule", "A", "--folder", tmp_path)
     one_line(code, err, "unrecognized arguments: --hebb_rule")
