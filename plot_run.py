@@ -36,12 +36,20 @@ def read_run(run_dir: str) -> list[dict]:
     path = Path(run_dir) / "metrics.csv"
     if not path.is_file():
         raise UserError(f"{run_dir}: no metrics.csv here (not a run folder, or no generation finished yet)")
-    rows = files.read_metrics(path)
+    try:
+        rows = files.read_metrics(path)
+    except (OSError, ValueError) as error:  # a folder, a pipe, bytes that are not text
+        raise UserError(f"{path}: cannot be read ({getattr(error, 'strerror', None) or error})") from None
     if not rows:
         raise UserError(f"{path} holds no generation yet")
     missing = [name for name in ("generation", "fitness_mean", "fitness_max", "fitness_min") if name not in rows[0]]
     if missing:
         raise UserError(f"{path} is not a metrics file of this tool (no column {', '.join(missing)})")
+    try:
+        plots.curves(rows)  # every value the picture reads is a number
+    except (TypeError, ValueError) as error:  # TypeError: a row cut short
+        raise UserError(f"{path} holds a value that is not a number ({error}); it is not metrics.csv as the run "
+                        "wrote it") from None
     return rows
 
 
@@ -58,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
         check_output("-o", args.output, plots.FIGURE_SUFFIXES, inputs)
         runs = [(label, read_run(run_dir)) for label, run_dir in zip(labels(args.run_dirs), args.run_dirs)]
         plots.save_comparison(Path(args.output), runs)
-    except (UserError, ValueError) as error:  # ValueError: a value in metrics.csv that is not a number
+    except (UserError, ValueError) as error:  # ValueError: a refused output
         print(f"plot_run.py: error: {error}", file=sys.stderr)
         return 2
     except OSError as error:

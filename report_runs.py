@@ -18,8 +18,10 @@ import sys
 from pathlib import Path
 
 from cli import Parser
-from cli.flags import positive_int
+from cli.flags import positive_int, seed_value
+from es.outputs import run_folder_of
 from report import stats
+from settings import SEED_RANGE
 
 
 def build_parser() -> Parser:
@@ -34,13 +36,19 @@ def build_parser() -> Parser:
                              "to score (default: all)")
     parser.add_argument("--out", type=Path, default=Path("runs/report"), metavar="DIR", help="where the files go")
     parser.add_argument("--reps", type=positive_int, default=stats.DEFAULT_REPS, help="bootstrap replications")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the bootstrap")
+    parser.add_argument("--seed", type=seed_value, default=0,
+                        help="seed of the bootstrap: a whole number from {} to {} (default: 0)".format(*SEED_RANGE))
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    run = run_folder_of(args.out.resolve() / "summary.md")
+    if run is not None:  # its files would go among a run's, and a second report would replace them
+        print(f"report_runs.py: error: --out {args.out} is {'in ' if run != args.out.resolve() else ''}the run folder "
+              f"{run}; give the report a folder of its own", file=sys.stderr)
+        return 2
     if not stats.available():
         print(f"report_runs.py: error: the statistics need rliable, which is not installed; install it with: "
               f"{stats.INSTALL_HINT}", file=sys.stderr)

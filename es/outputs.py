@@ -7,12 +7,13 @@ in one line, a path that
 - resolves (links followed) to a file of a run folder: a folder holding ``config.json`` or
   ``checkpoint.npz`` (``es.runfolder``), whose own files are named as in ``RUN_FILES`` (config,
   checkpoint, weights ``.dat``, ``.npz`` statistics, metrics, the fitness log and picture, logs,
-  journals, the lock) or lie in one of its sub-folders (TensorBoard's events); new names there,
-  such as an ``evaluation.json``, are allowed;
+  journals, the lock) or lie in one of its sub-folders (TensorBoard's events), or that exists there
+  already (an ``evaluation.json``, ``adaptation.png`` or ``frames.png`` an evaluation wrote); new names
+  there, such as a first ``evaluation.json``, are allowed;
 - is anywhere an optuna journal of ER-MRL (``optuna-journal_*.log``) or a file the same command reads;
 - has a suffix that is not one of the formats the output is written in (a PNG is never written
-  under ``.jpg``), or is a folder or a device, or lies in a folder that does not exist or cannot be
-  written.
+  under ``.jpg``), or is a folder or a device, or lies in a folder that does not exist or where no
+  file can be created (tried: permissions alone do not say so for root, nor for a read-only mount).
 
 The writers then write to a temporary file and rename it over the target (``es.files``).
 """
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import fnmatch
 import os
+import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -56,6 +58,17 @@ def same_file(first: str | Path, second: str | Path) -> bool:
     return first.resolve() == second.resolve()
 
 
+def can_create_in(folder: Path) -> bool:
+    """Whether a file can be created in ``folder``: one is, as the writers' temporary files are, and removed."""
+    try:
+        descriptor, name = tempfile.mkstemp(dir=folder, prefix=".", suffix=".tmp")
+    except OSError:
+        return False
+    os.close(descriptor)
+    os.unlink(name)
+    return True
+
+
 def check_output(flag: str, path: str | Path, suffixes: tuple[str, ...], inputs: Iterable[str | Path] = ()) -> Path:
     """``path`` as the output ``flag`` names, or an OutputRefused naming why it cannot be one."""
     given = str(path)
@@ -64,7 +77,7 @@ def check_output(flag: str, path: str | Path, suffixes: tuple[str, ...], inputs:
         raise OutputRefused(f"{flag} {given}: exists and is not a regular file (a folder or a device); give a file "
                             "name")
     resolved = target.resolve()
-    if not resolved.parent.is_dir() or not os.access(resolved.parent, os.W_OK | os.X_OK):
+    if not resolved.parent.is_dir() or not can_create_in(resolved.parent):
         raise OutputRefused(f"{flag} {given}: {target.parent} is not an existing writable folder")
     for other in inputs:
         if same_file(target, other):
@@ -75,6 +88,9 @@ def check_output(flag: str, path: str | Path, suffixes: tuple[str, ...], inputs:
                             or any(fnmatch.fnmatch(resolved.name, pattern) for pattern in RUN_FILES)):
         raise OutputRefused(f"{flag} {given} is {resolved.relative_to(run)} of the run folder {run}, a file the run "
                             "writes; give another file name")
+    if run is not None and resolved.exists():
+        raise OutputRefused(f"{flag} {given} is {resolved.name} of the run folder {run}, which exists: an output never "
+                            "replaces a run's file; give another file name")
     if fnmatch.fnmatch(resolved.name, JOURNAL):
         raise OutputRefused(f"{flag} {given} is an optuna journal of ER-MRL; give another file name")
     if target.suffix.lower() not in suffixes:

@@ -149,7 +149,14 @@ def test_the_output_guard(tmp_path):
         with pytest.raises(OutputRefused):
             check_output("--plot", run / name, (".png", ".json", ".csv", ".npz", ""))
     assert check_output("--json", run / "evaluation.json", (".json",)) == run / "evaluation.json"  # a new name
+    for name in ("evaluation.json", "adaptation.png", "frames.png"):  # once there, a file of the run like any
+        (run / name).write_bytes(b"an earlier evaluation's")
+        with pytest.raises(OutputRefused, match=f"is {name} of the run folder {run}, which exists: an output never "
+                                                "replaces a run's file"):
+            check_output("--plot", run / name, (".png", ".json"))
     assert check_output("--plot", tmp_path / "fitness.png", (".png",)) == tmp_path / "fitness.png"  # not a run's
+    (tmp_path / "fitness.png").write_bytes(b"x")  # outside a run folder, a file of the user's to replace
+    assert check_output("--plot", tmp_path / "fitness.png", (".png",)) == tmp_path / "fitness.png"
     with pytest.raises(OutputRefused, match="which this command reads"):
         check_output("--json", tmp_path / "in.json", (".json",), [tmp_path / "in.json"])
     with pytest.raises(OutputRefused, match="optuna journal"):
@@ -158,6 +165,10 @@ def test_the_output_guard(tmp_path):
         check_output("-o", tmp_path / "x.jpg", (".png",))
     with pytest.raises(OutputRefused, match="not an existing writable folder"):
         check_output("-o", tmp_path / "missing" / "x.png", (".png",))
+    if Path("/sys/kernel").is_dir():  # no file can be created there, by root either, whatever its permissions say
+        with pytest.raises(OutputRefused, match="/sys/kernel is not an existing writable folder"):
+            check_output("--video", "/sys/kernel/x.mp4", (".mp4",))
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["fitness.png", "run"]  # the probes left nothing
 
 
 @pytest.mark.parametrize("suffix, head", [(".png", b"\x89PNG"), (".pdf", b"%PDF"), (".svg", b"<?xml")])
