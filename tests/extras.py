@@ -24,6 +24,7 @@ EXTRAS = {
     "strategies": ("cmaes",),
     "stats": ("rliable", "arch", "pandas"),
     "bench": ("evotorch",),
+    "original": ("gym", "pkg_resources"),
 }
 
 
