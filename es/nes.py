@@ -18,8 +18,6 @@ Only the better half (k <= lambda/2) gets more than 1/lambda. ``nes_utilities`` 
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from es import exact
@@ -32,5 +30,5 @@ def nes_utilities(fitness: np.ndarray) -> np.ndarray | None:
     if population == 0 or np.all(fitness == fitness[0]):
         return None
     ranks = 1 + population - np.searchsorted(np.sort(fitness), fitness, side="right")  # 1 + how many are better
-    numerators = np.maximum(0.0, math.log2(population / 2 + 1) - exact.log2(ranks))
+    numerators = np.maximum(0.0, exact.log2(population / 2 + 1) - exact.log2(ranks))
     return numerators / numerators.sum() + 1.0 / population

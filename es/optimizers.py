@@ -30,6 +30,8 @@ from typing import Protocol
 
 import numpy as np
 
+from es import exact
+
 OptimizerState = dict[str, np.ndarray]
 
 
@@ -78,6 +80,9 @@ class Adam:
         t += 1;  a = lr * sqrt(1 - beta2^t) / (1 - beta1^t)
         m = beta1 * m + (1 - beta1) * g;  v = beta2 * v + (1 - beta2) * g^2
         theta += a * m / (sqrt(v) + epsilon)
+
+    beta^t is ``es.exact.power``'s (correctly rounded), not the C library's ``pow``, whose last bit follows
+    the CPU.
     """
 
     beta1: float = 0.9
@@ -90,7 +95,7 @@ class Adam:
         t = int(state.get("t", 0)) + 1
         first = self.beta1 * state.get("m", np.zeros_like(gradient)) + (1 - self.beta1) * gradient
         second = self.beta2 * state.get("v", np.zeros_like(gradient)) + (1 - self.beta2) * gradient * gradient
-        size = lr * np.sqrt(1 - self.beta2 ** t) / (1 - self.beta1 ** t)
+        size = lr * np.sqrt(1 - exact.power(self.beta2, t)) / (1 - exact.power(self.beta1, t))
         new_theta = theta + size * first / (np.sqrt(second) + self.epsilon)
         return new_theta.astype(np.float32), {"m": first, "v": second, "t": np.array(t)}
 

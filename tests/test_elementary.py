@@ -1,16 +1,13 @@
-"""The networks' elementary functions (``policies.elementary``) and the strategies' (``es.exact``): each the
-formula written out in numpy float32 term by term, bit for bit; exp within 1.2 ulp of exp over the
-normal range; the special values; and es.exact's functions one value at a time through ``math``.
+"""The networks' elementary functions (``policies.elementary``): each the formula written out in numpy float32
+term by term, bit for bit; exp within 1.2 ulp of exp over the normal range; the special values. The strategies'
+float64 functions (``es.exact``) are tested in tests/test_exact.py.
 """
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit
 
-from es import exact
 from policies.elementary import _E, _EXP_HIGH, _EXP_LOW, _LN2_HIGH, _LN2_LOW, _LOG2E, exp32, sigmoid32
 
 
@@ -74,17 +71,3 @@ def test_sigmoid_is_one_over_one_plus_exp():
     expected = np.float32(1.0) / (np.float32(1.0) + exp_of(-x))
     np.testing.assert_array_equal(got.view(np.uint32), expected.view(np.uint32))
     assert np.abs(got - 1 / (1 + np.exp(-x.astype(np.float64)))).max() < 2e-7
-
-
-def test_exact_functions_are_maths_one_value_at_a_time():
-    values = np.random.default_rng(0).uniform(0.01, 50.0, size=(7, 3))
-    for function, reference in ((exact.exp, math.exp), (exact.log, math.log), (exact.log2, math.log2)):
-        got = function(values)
-        assert got.shape == values.shape and got.dtype == np.float64
-        assert got.tolist() == [[reference(value) for value in row] for row in values.tolist()]
-
-
-def test_norm_is_the_square_root_of_numpys_pairwise_sum():
-    values = np.random.default_rng(1).standard_normal(100_003)
-    assert exact.norm(values) == math.sqrt(float(np.sum(values * values)))
-    assert exact.norm(np.float32([3.0, 4.0])) == 5.0

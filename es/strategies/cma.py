@@ -96,7 +96,8 @@ class LibraryCMA:
     def ask(self, state: ESState, rng: np.random.Generator, noise: NoiseTable) -> Population:
         optimizer = self._optimizer(state)
         optimizer.reseed_rng(int(rng.integers(0, SEED_LIMIT)))
-        members = np.array([optimizer.ask() for _ in range(self.population_size)], dtype=np.float32)
+        with np.errstate(over="ignore"):  # members beyond float32's range: the workers refuse them, naming them
+            members = np.array([optimizer.ask() for _ in range(self.population_size)], dtype=np.float32)
         return Population(np.arange(self.population_size, dtype=np.int64), np.ones(self.population_size, np.int8),
                           mirrored=False, rows=members)
 

@@ -133,7 +133,8 @@ class PGPE:
 
     def ask(self, state: ESState, rng: np.random.Generator, noise: NoiseTable) -> Population:
         population = mirrored_population(rng, noise, state.theta.size, self.population_size // 2)
-        return replace(population, scale=state.strategy["sigma"].astype(np.float32))
+        with np.errstate(over="ignore"):  # a sigma beyond float32's range: the workers refuse the parameters
+            return replace(population, scale=state.strategy["sigma"].astype(np.float32))
 
     def tell(self, state: ESState, noise: NoiseTable, population: Population,
              fitness: np.ndarray) -> tuple[ESState, dict]:

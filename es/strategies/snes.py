@@ -44,7 +44,7 @@ class SNESSettings(StrategySettings):
 
 def default_sigma_lr(dim: int) -> float:
     """Schaul et al. 2011's learning rate of sigma: (3 + ln d) / (5 sqrt d)."""
-    return (3 + math.log(dim)) / (5 * math.sqrt(dim))
+    return (3 + float(exact.log(dim))) / (5 * math.sqrt(dim))
 
 
 def utilities(fitness: np.ndarray) -> np.ndarray | None:
@@ -53,7 +53,7 @@ def utilities(fitness: np.ndarray) -> np.ndarray | None:
     population = fitness.size
     if np.all(fitness == fitness[0]):
         return None
-    by_rank = np.maximum(0.0, math.log(population / 2 + 1) - exact.log(np.arange(1, population + 1)))
+    by_rank = np.maximum(0.0, exact.log(population / 2 + 1) - exact.log(np.arange(1, population + 1)))
     by_rank = by_rank / by_rank.sum() - 1 / population
     order = np.argsort(-fitness, kind="stable")  # best first
     values = np.empty(population)
@@ -78,8 +78,9 @@ class SNES:
 
     def ask(self, state: ESState, rng: np.random.Generator, noise: NoiseTable) -> Population:
         indices = noise.sample_indices(rng, state.theta.size, self.population_size)
-        return Population(indices, np.ones(self.population_size, dtype=np.int8), mirrored=False,
-                          scale=state.strategy["sigma"].astype(np.float32))
+        with np.errstate(over="ignore"):  # a sigma beyond float32's range: the workers refuse the parameters
+            scale = state.strategy["sigma"].astype(np.float32)
+        return Population(indices, np.ones(self.population_size, dtype=np.int8), mirrored=False, scale=scale)
 
     def tell(self, state: ESState, noise: NoiseTable, population: Population,
              fitness: np.ndarray) -> tuple[ESState, dict]:
