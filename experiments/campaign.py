@@ -16,7 +16,10 @@ clone on another machine continues it bit for bit (docs/experiments.md, "The cam
   saved and gone within a minute of one SIGINT.
 - **The pid file.** While a chunk runs, ``results/paper/campaign.pid`` holds this process's id (what a
   session's before-stop hook signals); it is removed when the chunk ends. A live campaign's file is
-  never taken over: a second campaign is refused.
+  never taken over: a second campaign is refused, with the command that stops the first. The file is
+  data (``holder``): one naming a process that has ended is taken over, and one this tool did not
+  write (not a process id, or the id of a live process that is not a campaign: pid 1, an id reused)
+  is refused with how to remove it; the tool never advises signalling a process that is not a campaign.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from __future__ import annotations
 import contextlib
 import csv
 import os
+import shlex
 import signal
 import subprocess
 import time
@@ -36,6 +40,7 @@ PID_FILE = "campaign.pid"  # beside the experiments' folders: results/paper/camp
 STOPPED = (130, -signal.SIGINT)  # a child that stopped at a SIGINT, its last saved generation intact
 PROGRESS = "progress.md"  # beside them too: how far each run of the campaign got, written at every chunk's end
 PACE = 10  # the generations whose mean duration projects the rest of a run
+MIN_BUDGET = 1  # minutes: the least a chunk is given (the training starts, runs a generation, saves)
 GRACE = 30.0  # seconds a generation may take to finish after the first SIGINT, before a stop at once
 POLL = 0.5  # seconds between looks at the child and at metrics.csv
 SAFETY = 1.15  # a generation may take this much longer than the last one did
@@ -54,27 +59,75 @@ class CampaignError(ValueError):
 
 @contextlib.contextmanager
 def pid_file(path: Path):
-    """Hold ``path`` with this process's id while the block runs; refuse one a live process holds."""
-    try:
-        holder = int(path.read_text().strip() or 0)
-    except (FileNotFoundError, ValueError):
-        holder = 0
-    if holder and holder != os.getpid() and _alive(holder):
-        raise CampaignError(f"a campaign is already running (pid {holder}, in {path}); wait for it to end, or stop "
-                            f"it with: kill -INT {holder}")
-    path.parent.mkdir(parents=True, exist_ok=True)
+    """Hold ``path`` with this process's id while the block runs; refuse one that a live campaign holds, and one
+    this tool did not write (``holder``). A file naming a process that has ended is taken over, and said so."""
+    pid = holder(path)
+    if pid is not None and pid != os.getpid():
+        print(f"campaign: {path} named process {pid}, which has ended (a campaign stopped without removing it); "
+              "taking it over", flush=True)
+    made = [folder for folder in (path.parent, *path.parent.parents) if not folder.exists()]
     staged = path.with_name(path.name + ".tmp")
-    staged.write_text(f"{os.getpid()}\n")
-    staged.replace(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        staged.write_text(f"{os.getpid()}\n")
+        staged.replace(path)
+    except OSError as error:
+        raise CampaignError(f"cannot write {path}: {error.strerror or error}") from None
     try:
         yield
     finally:
         with contextlib.suppress(OSError, ValueError):
             if int(path.read_text().strip()) == os.getpid():
                 path.unlink()
+        for folder in made:  # innermost first: where nothing else was written meanwhile
+            try:
+                folder.rmdir()
+            except OSError:
+                break
 
 
-def _alive(pid: int) -> bool:
+def holder(path: Path) -> int | None:
+    """The process a pid file names, if it has ended (None: no file); a CampaignError for a live campaign's file,
+    naming how to stop it, and for a file this tool did not write (not a number in the range of process ids, or
+    the id of a live process that is not a campaign), naming how to remove it. The file is data: its number is
+    never signalled nor advised to be unless it is a campaign's."""
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        return None
+    except (OSError, UnicodeDecodeError) as error:  # a folder, a file it cannot read
+        problem = "is a folder" if path.is_dir() else f"cannot be read ({getattr(error, 'strerror', None) or error})"
+        raise CampaignError(f"{path} {problem}, not the campaign's pid file; move it away, then start again") \
+            from None
+    remove = f"if no campaign is running, remove it (rm {shlex.quote(str(path))}), then start again"
+    words = text.split()
+    if len(words) != 1 or not words[0].isdigit() or not 1 <= int(words[0]) <= max_pid():
+        shown = f"holds {text.strip()[:40]!r}" if text.strip() else "is empty"
+        raise CampaignError(f"{path} {shown}, not the id of a process this tool started; {remove}")
+    pid = int(words[0])
+    if pid == os.getpid() or not alive(pid):
+        return pid
+    running = command_line(pid)
+    if running is None:  # a system without /proc: what it runs cannot be read
+        raise CampaignError(f"{path} names process {pid}, which is running; if it is a campaign, wait for it to end; "
+                            f"if not, {remove}")
+    if not any(Path(word).name == "paper.py" for word in running):
+        shown = shlex.join(running)[:80] or "no command: a kernel thread, or a process that has ended"
+        raise CampaignError(f"{path} names process {pid}, which is not a campaign ({shown}): the file is left from "
+                            f"a campaign that ended; {remove}")
+    raise CampaignError(f"a campaign is already running (pid {pid}, in {path}); wait for it to end, or stop it with: "
+                        f"kill -INT {pid}")
+
+
+def max_pid() -> int:
+    """The largest process id this system gives (Linux's pid_max; elsewhere a 32-bit system's)."""
+    try:
+        return int(Path("/proc/sys/kernel/pid_max").read_text())
+    except (OSError, ValueError):
+        return 2**31 - 1
+
+
+def alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -82,6 +135,16 @@ def _alive(pid: int) -> bool:
     except PermissionError:  # someone else's process
         return True
     return True
+
+
+def command_line(pid: int) -> list[str] | None:
+    """The words of the command process ``pid`` runs (none for a kernel thread or a process that has ended), or
+    None where this system does not say (no /proc)."""
+    try:
+        words = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+    except OSError:
+        return [] if Path("/proc/self").exists() else None
+    return [word.decode(errors="replace") for word in words if word]
 
 
 def _last_row(metrics: Path) -> dict | None:
@@ -248,12 +311,15 @@ def generation_step_limit(config: dict) -> int | None:
 
     import envs  # noqa: F401  (registers the pyBullet environments, the damaged ants, the fast CarRacing)
 
-    env, es = config.get("env", {}), config.get("es", {})
-    if not env.get("env_ids") or "popsize" not in es:
-        return None
-    cap = env.get("max_episode_steps")
+    env, es = (config.get(name) if isinstance(config.get(name), dict) else {} for name in ("env", "es"))
+    env_ids, cap = env.get("env_ids"), env.get("max_episode_steps")
+    numbers = [es.get("popsize"), es.get("episodes", 1), es.get("eval_episodes", 0), es.get("eval_every") or 1,
+               cap or 1]
+    if (not isinstance(env_ids, list) or not env_ids or not all(isinstance(env_id, str) for env_id in env_ids)
+            or not all(isinstance(number, int) and not isinstance(number, bool) and number > 0 for number in numbers)):
+        return None  # not the settings a config.json records
     limits = []
-    for env_id in env["env_ids"]:
+    for env_id in env_ids:
         spec = gym.registry.get(env_id.rpartition(":")[2])
         known = [limit for limit in (cap, spec.max_episode_steps if spec is not None else None) if limit]
         if not known:
@@ -265,13 +331,36 @@ def generation_step_limit(config: dict) -> int | None:
     return episodes * sum(limits)
 
 
+MACHINE_KEYS = {"cpu": str, "workers": int, "from_generation": int}  # what report.machine.machines_text reads
+
+
+def recorded(path: Path) -> dict:
+    """A run's config.json, with what ``measure`` reads of it checked: the generations it asks for, the machines
+    it ran on; a ValueError names what is wrong (a hand-edited file)."""
+    from es import files
+
+    config = files.read_json(path)
+    if not isinstance(config, dict):
+        raise ValueError(f"{path} is not a JSON object")
+    generations = config.get("run", {}).get("generations") if isinstance(config.get("run"), dict) else None
+    if not isinstance(generations, int) or isinstance(generations, bool) or generations < 1:
+        raise ValueError(f"{path}: run.generations must be a whole number >= 1, got {generations!r}")
+    machines = config.get("machines", [])
+    if not isinstance(machines, list) or not all(
+            isinstance(entry, dict) and all(isinstance(entry.get(key), kind) for key, kind in MACHINE_KEYS.items())
+            for entry in machines):
+        raise ValueError(f"{path}: machines must be a list of objects with {', '.join(MACHINE_KEYS)}, got "
+                         f"{str(machines)[:60]}")
+    return config
+
+
 def measure(run_dir: Path) -> Progress:
     """The ``Progress`` of the run in ``run_dir``."""
     from es import files
     from es.runfolder import read_checkpoint
     from report.machine import machines_text
 
-    config = files.read_json(run_dir / "config.json")
+    config = recorded(run_dir / "config.json")
     done = read_checkpoint(run_dir / "checkpoint.npz").generation
     rows = files.read_metrics(run_dir / "metrics.csv") if (run_dir / "metrics.csv").exists() else []
     rows = [row for row in rows if int(row["generation"]) <= done]  # a generation recorded but not saved: not done

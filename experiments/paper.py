@@ -19,7 +19,8 @@ Runs take hours to days on 2 cores (experiments/README.md). Each experiment has 
 are committed as they progress); running the same command again resumes the newest run there from its
 checkpoint (--resume RUN_DIR, --generations being the total), and once training is complete it only
 evaluates. The evaluation is the final centre's (evaluation.json, the run's result), then the best
-centre's, the one with the best training return (evaluation_best.json), on the same episodes.
+centre's, the one with the best training return (evaluation_best.json), on the same episodes; a centre
+evaluated already is not evaluated again (an output never replaces a run's file: remove it first).
 --dry-run prints the commands instead.
 
 --budget MINUTES trains one chunk (experiments/campaign.py): it stops at a generation boundary before
@@ -71,9 +72,16 @@ HELD_OUT_SEED = 2**31  # the evaluation's first episode seed: training draws its
 EXPERIMENTS = sorted({path.stem.split("_")[0] for path in FILES.glob("*_*.toml")})
 
 
-def parse(argv: list[str] | None) -> argparse.Namespace:
+def parse(argv: list[str] | None, entry_of: str | None = None) -> argparse.Namespace:
+    """paper.py's arguments; ``entry_of``: they are a run of that campaign file, and a problem with them raises a
+    CampaignError naming it (the file is data, and its errors are not the command line's)."""
     parser = Parser(prog="paper.py", description=__doc__.splitlines()[0],
                     formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:]))
+    if entry_of is not None:
+        def refuse(message: str):
+            raise campaign.CampaignError(f"{entry_of}: the run {shlex.join(argv)!r}: {message}; each run is an "
+                                         "experiment, a kind and its flags, as paper.py takes them")
+        parser.error = refuse
     parser.add_argument("experiment", choices=(*EXPERIMENTS, "campaign"),
                         help="an experiment, or campaign: the next runs of experiments/paper/campaign.toml (--budget)")
     parser.add_argument("kind", nargs="?", choices=(*TRAIN_SCRIPTS, "report", "curves"),
@@ -106,6 +114,9 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--status", action="store_true",
                         help="with campaign: how far each run got, and what its generations cost (from metrics.csv)")
     args = parser.parse_args(argv)
+    if args.budget is not None and args.budget < campaign.MIN_BUDGET:
+        parser.error(f"--budget {args.budget:g} leaves no time for a chunk: the training takes seconds to start and "
+                     f"a generation to save; give --budget {campaign.MIN_BUDGET} or more (minutes)")
     if args.experiment == "campaign":
         others = [f"--{name.replace('_', '-')}" for name in ("kind", "seed", "popsize", "generations", "episodes",
                                                              "folder", "dry_run", "reproduce")
@@ -213,8 +224,12 @@ def evaluate_command(args: argparse.Namespace, experiment: dict, run_dir: Path, 
     if centre == "best":
         return command + ["--json", str(run_dir / campaign.BEST_EVALUATION), main.flag, str(run_dir), "--centre",
                           "best"]
-    command += ["--json", str(run_dir / campaign.EVALUATION), "--plot", str(run_dir / "adaptation.png")]
-    if evaluation.get("frames"):
+    command += ["--json", str(run_dir / campaign.EVALUATION)]
+    # the pictures of an evaluation whose statistics were not written (stopped between them) are there already: an
+    # output never replaces a run's file, and the same episode draws the same pictures
+    if not (ROOT / run_dir / "adaptation.png").exists():
+        command += ["--plot", str(run_dir / "adaptation.png")]
+    if evaluation.get("frames") and not (ROOT / run_dir / FRAMES).exists():
         command += ["--video", str(run_dir / FRAMES)]
     # the run's main file: the evaluate script takes the rule, the network and the files beside it (a CNN,
     # co-evolved initial weights) from the run folder
@@ -330,7 +345,11 @@ def report(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
     if args.experiment == "campaign":
-        return status() if args.status else run_queue(args)
+        try:
+            return status() if args.status else run_queue(args)
+        except campaign.CampaignError as error:  # its file: not a list of runs
+            print(f"paper.py: error: {error}", file=sys.stderr)
+            return 2
     if args.kind == "report":
         return report(args)
     if args.kind == "curves":
@@ -428,7 +447,10 @@ def experiment_main(args: argparse.Namespace, deadline: float | None) -> int:
     if run_dir is None:  # a dry run before any training
         say("# then, once the run exists, the evaluation of its final centre (last*.dat) and its best")
         run_dir = folder / "<run folder>"
-    for centre, _, _ in CENTRES:
+    for centre, name, what in CENTRES:
+        if (ROOT / run_dir / name).exists():  # evaluated by an earlier command: an output never replaces it
+            say(f"# {what} is evaluated already: {shown(ROOT / run_dir / name)} (remove it to evaluate again)")
+            continue
         code = run(evaluate_command(args, experiment, run_dir, centre), args.dry_run)
         if code != 0:
             return code
@@ -503,7 +525,7 @@ def write_pages(runs: Path, experiment: str) -> None:
     try:
         files.atomic_write_text(runs / campaign.PROGRESS, progress_page(runs))
         written = curves_figure(runs, experiment)
-    except (OSError, KeyError, *USER_ERRORS, ValueError) as error:  # a run folder's file unreadable, or no room
+    except (OSError, KeyError, TypeError, *USER_ERRORS, ValueError) as error:  # a run's file unreadable, no room
         say(f"campaign: the progress page or the curves in {shown(runs)} could not be written: "
             f"{type(error).__name__}: {error}")
         return
@@ -527,11 +549,31 @@ def continue_words(args: argparse.Namespace) -> str:
 
 
 def campaign_entries(threads: int | None = None) -> list[argparse.Namespace]:
-    """The campaign's runs (experiments/paper/campaign.toml), each as paper.py's arguments."""
-    with open(CAMPAIGN, "rb") as handle:
-        entries = tomllib.load(handle)["runs"]
+    """The campaign's runs (experiments/paper/campaign.toml), each as paper.py's arguments; a file that is not
+    such a list raises a CampaignError naming it and what it must hold."""
+    source = shown(CAMPAIGN)
+    holds = 'a campaign file holds runs = ["EXPERIMENT KIND FLAGS...", ...], e.g. runs = ["carracing hebbian --seed 2"]'
+    try:
+        with open(CAMPAIGN, "rb") as handle:
+            entries = tomllib.load(handle).get("runs")
+    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
+        raise campaign.CampaignError(f"{source}: {getattr(error, 'strerror', None) or error}; {holds}") from None
+    if not isinstance(entries, list) or not entries or not all(isinstance(entry, str) for entry in entries):
+        raise campaign.CampaignError(f"{source} has no list of runs; {holds}")
     extra = ["--threads", str(threads)] if threads is not None else []
-    return [parse([*shlex.split(entry), *extra]) for entry in entries]
+    found = []
+    for entry in entries:
+        try:
+            words = shlex.split(entry)
+        except ValueError as error:  # an unclosed quote
+            raise campaign.CampaignError(f"{source}: the run {entry!r}: {error}; {holds}") from None
+        args = parse([*words, *extra], entry_of=str(source))
+        if args.experiment == "campaign" or args.kind not in TRAIN_SCRIPTS or args.budget is not None \
+                or args.dry_run or args.reproduce is not None:
+            raise campaign.CampaignError(f"{source}: the run {entry!r} is not an experiment and a kind to train "
+                                         f"({', '.join(TRAIN_SCRIPTS)}) with its flags; {holds}")
+        found.append(args)
+    return found
 
 
 def entry_folder(args: argparse.Namespace) -> Path:
@@ -561,7 +603,7 @@ def status() -> int:
             continue
         try:
             progress = campaign.measure(run_dir)
-        except (OSError, KeyError, *USER_ERRORS, ValueError) as error:
+        except (OSError, KeyError, TypeError, *USER_ERRORS, ValueError) as error:  # a hand-edited or damaged file
             print(f"paper.py: error: {name}: {shown(run_dir)} cannot be read ({type(error).__name__}: {error})",
                   file=sys.stderr)
             code = 2
@@ -623,7 +665,7 @@ def run_queue(args: argparse.Namespace) -> int:
         run_dir = latest_run(entry_folder(entry))
         if run_dir is not None and evaluated(run_dir):
             continue
-        if deadline - time.monotonic() < 60:
+        if deadline - time.monotonic() < 60 * campaign.MIN_BUDGET:
             say("campaign: less than a minute of the budget left; stopping before the next run")
             return 0
         say(f"campaign: next run: {entry.experiment} {entry.kind} seed {entry.seed if entry.seed is not None else 1}")

@@ -128,14 +128,14 @@ def test_a_chunk_committed_and_continued_in_a_clone_is_the_uninterrupted_run(tmp
 
 
 def test_a_budget_stops_at_a_generation_boundary_with_everything_saved(tmp_path):
-    result = paper(*SMALL, "--generations", "1000", folder=tmp_path / "runs" / "x", budget=0.25)
+    result = paper(*SMALL, "--generations", "1000", folder=tmp_path / "runs" / "x", budget=1)
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
     run = run_of(tmp_path / "runs" / "x")
     done = read_checkpoint(run / "checkpoint.npz").generation
     assert done >= 1 and generations_recorded(run) == list(range(1, done + 1))
     with open(run / "metrics.csv", newline="") as handle:
         trained = float(list(csv.DictReader(handle))[-1]["total_seconds"])
-    assert trained <= 0.25 * 60  # the generations saved all ended within the budget, whatever the machine's load
+    assert trained <= 1 * 60  # the generations saved all ended within the budget, whatever the machine's load
     assert f"generation {done} of 1000, saved" in result.stdout
     assert {path.name for path in run.iterdir()} == KEPT_WHILE_RUNNING
     assert not (tmp_path / "runs" / "campaign.pid").exists()
@@ -168,7 +168,8 @@ def test_a_second_sigint_stops_at_once_and_the_last_save_stays_intact(tmp_path):
 
 def test_a_second_campaign_is_refused_in_one_line(tmp_path):
     (tmp_path / "runs").mkdir()
-    holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    (tmp_path / "paper.py").write_text("import time\ntime.sleep(60)\n")  # a process that runs a paper.py
+    holder = subprocess.Popen([sys.executable, str(tmp_path / "paper.py")])
     try:
         (tmp_path / "runs" / "campaign.pid").write_text(f"{holder.pid}\n")
         result = paper(*SMALL, "--generations", "2", folder=tmp_path / "runs" / "x")
@@ -189,7 +190,28 @@ def test_a_stale_pid_file_is_taken_over(tmp_path):
     (tmp_path / "runs" / "campaign.pid").write_text(ended.stdout)
     result = paper(*SMALL, "--generations", "1", folder=tmp_path / "runs" / "x")
     assert result.returncode == 0, result.stderr[-2000:]
+    assert (f"campaign: {tmp_path / 'runs' / 'campaign.pid'} named process {ended.stdout.strip()}, which has ended (a "
+            "campaign stopped without removing it); taking it over") in result.stdout
     assert not (tmp_path / "runs" / "campaign.pid").exists()
+
+
+def test_a_live_process_that_is_not_a_campaign_is_never_advised_to_be_signalled(tmp_path):
+    """A pid file naming a live process that is not a campaign (an id reused since the campaign that wrote it
+    ended): refused, with how to remove the file, and no word of signalling that process."""
+    (tmp_path / "runs").mkdir()
+    holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        (tmp_path / "runs" / "campaign.pid").write_text(f"{holder.pid}\n")
+        result = paper(*SMALL, "--generations", "2", folder=tmp_path / "runs" / "x")
+    finally:
+        holder.kill()
+        holder.wait()
+    pid_file = tmp_path / "runs" / "campaign.pid"
+    assert result.returncode == 2 and result.stderr.strip().startswith(
+        f"paper.py: error: {pid_file} names process {holder.pid}, which is not a campaign ("), result.stderr
+    assert result.stderr.strip().endswith(f"if no campaign is running, remove it (rm {pid_file}), then start again")
+    assert "kill" not in result.stderr and not (tmp_path / "runs" / "x").exists()
+    assert pid_file.read_text() == f"{holder.pid}\n"
 
 
 def test_prune_keeps_what_continuing_and_evaluating_need(tmp_path):
@@ -401,3 +423,63 @@ def test_the_status_names_a_run_it_cannot_read_and_goes_on(tmp_path, monkeypatch
     assert captured.out.strip() == "ant static seed 1: not started"
     assert captured.err.strip().startswith(f"paper.py: error: carracing static seed 1: {broken} cannot be read "
                                            "(RunFolderError: cannot resume from")
+
+
+@pytest.mark.parametrize("text, problem", [
+    ('runs = ["carracing hebbian"', "Unclosed array"),
+    ("x = 1\n", "has no list of runs"),
+    ("runs = []\n", "has no list of runs"),
+    ("runs = [1, 2]\n", "has no list of runs"),
+    (None, "No such file or directory"),
+    ('runs = ["c hebbian"]\n', "the run 'c hebbian': argument experiment: invalid choice: 'c'"),
+    ('runs = ["carracing hebbian --popsize x"]\n', "the run 'carracing hebbian --popsize x': argument --popsize"),
+    ('runs = ["carracing report"]\n', "the run 'carracing report' is not an experiment and a kind to train"),
+    ('runs = ["campaign --budget 5"]\n', "the run 'campaign --budget 5' is not an experiment and a kind to train"),
+])
+@pytest.mark.parametrize("argv", [["campaign", "--status"], ["campaign", "--budget", "10"]])
+def test_a_broken_campaign_file_is_named_in_one_line(tmp_path, monkeypatch, capsys, text, problem, argv):
+    import experiments.paper as paper_script
+
+    entries = tmp_path / "campaign.toml"
+    if text is not None:
+        entries.write_text(text)
+    monkeypatch.setattr(paper_script, "CAMPAIGN", entries)
+    monkeypatch.setattr(paper_script, "RESULTS", tmp_path / "results")
+    assert paper_script.main(argv) == 2
+    captured = capsys.readouterr()
+    (line,) = captured.err.strip().splitlines()
+    assert line.startswith(f"paper.py: error: {entries}") and problem in line, line
+    assert line.endswith('a campaign file holds runs = ["EXPERIMENT KIND FLAGS...", ...], e.g. runs = ["carracing '
+                         'hebbian --seed 2"]') or line.endswith("each run is an experiment, a kind and its flags, as "
+                                                               "paper.py takes them"), line
+    assert captured.out == "" and sorted(path.name for path in tmp_path.iterdir()) == (
+        ["campaign.toml"] if text is not None else [])
+
+
+@pytest.mark.parametrize("config, problem", [
+    ("[1, 2]", "config.json is not a JSON object"),
+    ('{"run": {"generations": "300"}}', "config.json: run.generations must be a whole number >= 1, got '300'"),
+    ('{"run": {"generations": 300}, "machines": "AMD"}', "config.json: machines must be a list of objects with cpu, "
+                                                          "workers, from_generation, got AMD"),
+])
+def test_the_status_and_a_chunks_pages_name_a_config_json_of_the_wrong_types(tmp_path, monkeypatch, capsys, config,
+                                                                             problem):
+    import experiments.paper as paper_script
+
+    entries = tmp_path / "campaign.toml"
+    entries.write_text('runs = ["carracing static --seed 1", "ant static --seed 1"]\n')
+    monkeypatch.setattr(paper_script, "CAMPAIGN", entries)
+    monkeypatch.setattr(paper_script, "RESULTS", tmp_path / "results")
+    broken = tmp_path / "results" / "carracing_static_seed1" / "20260101-000000_CarRacing-v0_seed1"
+    broken.mkdir(parents=True)
+    (broken / "checkpoint.npz").write_bytes(b"not read: its config.json is read first")
+    (broken / "config.json").write_text(config)
+    assert paper_script.main(["campaign", "--status"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out.strip() == "ant static seed 1: not started"
+    assert captured.err.strip() == (f"paper.py: error: carracing static seed 1: {broken} cannot be read (ValueError: "
+                                    f"{broken}/{problem})")
+    paper_script.write_pages(tmp_path / "results", "carracing")  # what a chunk writes at its end
+    assert capsys.readouterr().out.strip() == (f"campaign: the progress page or the curves in {tmp_path / 'results'} "
+                                               f"could not be written: ValueError: {broken}/{problem}")
+    assert sorted(path.name for path in (tmp_path / "results").iterdir()) == ["carracing_static_seed1"]
