@@ -41,10 +41,12 @@ from cli.hints import TRAIN_SCRIPTS  # noqa: E402
 from cli.train import check_writable, config_from_args  # noqa: E402
 from es import files  # noqa: E402
 from experiments.paper import latest_run  # noqa: E402
+from settings import SEED_RANGE  # noqa: E402
 
 SET_BY_LAUNCHER = ("seed", "threads", "resume")
 RESUMABLE = tuple(item.name for item in declared() if item.spec.resumable)  # what a resume may change
 RECORD = "launch.json"
+SEED_BYTES = 4096  # memory per seed of a launch: its command, its log's path, its task in the pool
 
 
 def parse(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
@@ -64,6 +66,18 @@ def parse(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
                         help="with --ray: 'auto' or HOST:PORT of a running cluster (default: a local Ray)")
     parser.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
     args = parser.parse_args(mine)
+    last = args.first_seed + args.seeds - 1
+    if last > SEED_RANGE[1]:  # before any list of seeds is made: --seeds 3000000000 is refused, not allocated
+        parser.error(f"--first_seed {args.first_seed} with --seeds {args.seeds} runs past the largest seed "
+                     f"{SEED_RANGE[1]} (the last would be {last}); give --seeds {SEED_RANGE[1] - args.first_seed + 1} "
+                     "or fewer, or a smaller --first_seed")
+    memory = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    if args.seeds * SEED_BYTES > memory // 2:
+        parser.error(f"--seeds {args.seeds} needs about {args.seeds * SEED_BYTES / 2**30:.0f} GiB to hold the launch's "
+                     f"commands, more than half of this machine's {memory / 2**30:.1f} GiB; give --seeds "
+                     f"{memory // 2 // SEED_BYTES} or fewer")
+    if args.ray_address is not None and not args.ray:
+        parser.error("--ray_address has an effect only with --ray; add --ray or leave --ray_address out")
     if not training:
         parser.error("give the training command after --, e.g. -- train_static.py --environment CartPole-v1 "
                      "--folder runs/cartpole")
