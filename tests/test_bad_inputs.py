@@ -267,6 +267,7 @@ class Case:
     rewrites: tuple[str, ...] = ()  # the names of files the command rewrites by design (a resume's config.json)
     creates: str | None = None  # the folder under the case's where the command starts a new run
     mounts: bool = False  # needs to mount a small filesystem
+    modules: tuple[str, ...] = ()  # optional packages it needs (a logger's extra)
 
 
 def train(*words) -> Callable[[Path, Path], list[str]]:
@@ -301,6 +302,68 @@ def link_to_config(run: Path, work: Path) -> None:
     (work / "out.json").symlink_to(run / "config.json")
 
 
+def resume_with(*words) -> Callable[[Path, Path], list[str]]:
+    return lambda run, work: [*resume(run, work), *words]
+
+
+def edit_record(key: str, value) -> Callable[[Path, Path], None]:
+    """config.json with a key of the run's history (``machines``, ``resumed``) set to ``value``."""
+    def prepare(run: Path, work: Path) -> None:
+        data = json.loads((run / "config.json").read_text())
+        data[key] = value
+        (run / "config.json").write_text(json.dumps(data))
+    return prepare
+
+
+def write_config(text: str) -> Callable[[Path, Path], None]:
+    return lambda run, work: (run / "config.json").write_text(text)
+
+
+def evaluated(run: Path, work: Path) -> None:
+    """The files an evaluation of the run (experiments/paper.py's) wrote into its folder."""
+    (run / "evaluation.json").write_text('{"environments": []}\n')
+    (run / "adaptation.png").write_bytes(b"\x89PNG earlier evaluation")
+    (run / "frames.png").write_bytes(b"\x89PNG earlier frames")
+
+
+def edit_metrics(old: bytes, new: bytes) -> Callable[[Path, Path], None]:
+    def prepare(run: Path, work: Path) -> None:
+        text = (run / "metrics.csv").read_bytes()
+        (run / "metrics.csv").write_bytes(text.replace(old, new, 1) if old else text + new)
+    return prepare
+
+
+def fitness_mean_abc(run: Path, work: Path) -> None:
+    lines = (run / "metrics.csv").read_text().splitlines(keepends=True)
+    fields = lines[1].split(",")
+    fields[1] = "abc"  # fitness_mean of generation 1
+    (run / "metrics.csv").write_text(lines[0] + ",".join(fields) + "".join(lines[2:]))
+
+
+def pid_file(text: str | None) -> Callable[[Path, Path], None]:
+    """A campaign.pid beside the experiment's folder: holding ``text``, or a folder (None)."""
+    def prepare(run: Path, work: Path) -> None:
+        if text is None:
+            (work / "campaign.pid").mkdir()
+        else:
+            (work / "campaign.pid").write_text(text)
+    return prepare
+
+
+def chunk(*words) -> Callable[[Path, Path], list[str]]:
+    """A campaign chunk of a tiny CarRacing run in the case's folder ``x`` (its pid file: the case's)."""
+    return lambda run, work: ["experiments/paper.py", "carracing", "hebbian", "--popsize", "4", "--episodes", "1",
+                              "--generations", "1", "--folder", str(work / "x"), "--budget", "10", *words]
+
+
+def seeds_with(*words) -> Callable[[Path, Path], list[str]]:
+    return lambda run, work: ["experiments/seeds.py", *words, "--", "train_static.py", "--environment",
+                              "CartPole-v1", "--popsize", "4", "--generations", "1", "--folder", str(work / "launch")]
+
+
+WANDB_ONLINE = {"WANDB_MODE": "online", "WANDB_API_KEY": "0" * 40}  # a login, so that W&B would go online
+
+
 CASES = {
     # flags and faults
     "threads far above the cores": Case(train(*RUN[:6], "--threads", "1000", "--folder", lambda r, w: str(w / "new")),
@@ -332,6 +395,42 @@ CASES = {
                                        "fitness.png of the run folder"),
     "plot_run.py -o x.jpg": Case(lambda run, work: ["plot_run.py", str(run), "-o", str(work / "x.jpg")],
                                  "give a name ending in .png"),
+    "--json an earlier evaluation.json": Case(evaluate("--json", in_run("evaluation.json")),
+                                              "evaluation.json of the run folder", prepare=evaluated),
+    "--plot an earlier adaptation.png": Case(evaluate("--plot", in_run("adaptation.png")),
+                                             "which exists: an output never replaces a run's file", prepare=evaluated),
+    "--video an earlier frames.png": Case(evaluate("--video", in_run("frames.png")),
+                                          "which exists: an output never replaces a run's file", prepare=evaluated),
+    "plot_run.py -o an earlier adaptation.png": Case(
+        lambda run, work: ["plot_run.py", str(run), "-o", str(run / "adaptation.png")],
+        "adaptation.png of the run folder", prepare=evaluated),
+    "--video where no file can be created": Case(evaluate("--video", "/sys/x.mp4"),
+                                                 "--video /sys/x.mp4: /sys is not an existing writable folder"),
+    "--json where no file can be created": Case(evaluate("--json", "/proc/x.json"),
+                                                "--json /proc/x.json: /proc is not an existing writable folder"),
+    "report_runs.py --out a run folder": Case(
+        lambda run, work: ["report_runs.py", "--group", f"a={run}", "--group", f"b={run}", "--out", str(run)],
+        "is the run folder"),
+    # the other scripts' values and files
+    "report_runs.py --seed -1": Case(lambda run, work: ["report_runs.py", "--group", f"a={run}", "--seed", "-1"],
+                                     "--seed: must be a whole number from 0 to 2147483647, got -1"),
+    "report_runs.py --seed 2**32": Case(
+        lambda run, work: ["report_runs.py", "--group", f"a={run}", "--seed", "4294967296"],
+        "--seed: must be a whole number from 0 to 2147483647, got 4294967296"),
+    "plot_run.py on a metrics.csv that is not text": Case(
+        lambda run, work: ["plot_run.py", str(run), "-o", str(work / "x.png")], "metrics.csv: cannot be read ('utf-8'",
+        prepare=edit_metrics(b"", b"\xff\xfe\n")),
+    "plot_run.py on a metrics.csv value that is not a number": Case(
+        lambda run, work: ["plot_run.py", str(run), "-o", str(work / "x.png")],
+        "metrics.csv holds a value that is not a number (could not convert string to float: 'abc')",
+        prepare=fitness_mean_abc),
+    "seeds.py past the largest seed": Case(seeds_with("--first_seed", "2147483647", "--seeds", "2"),
+                                           "--first_seed 2147483647 with --seeds 2 runs past the largest seed"),
+    "seeds.py --seeds 3000000000": Case(seeds_with("--seeds", "3000000000"),
+                                        "--first_seed 1 with --seeds 3000000000 runs past the largest seed"),
+    "seeds.py --seeds beyond memory": Case(seeds_with("--seeds", "2000000000"), "needs about"),
+    "seeds.py --ray_address without --ray": Case(seeds_with("--ray_address", "auto"),
+                                                 "--ray_address has an effect only with --ray"),
     # TOML
     "TOML syntax error": Case(
         train("--config", lambda r, w: str(w / "bad.toml"), "--folder", lambda r, w: str(w / "new")), "bad.toml",
@@ -356,6 +455,52 @@ CASES = {
                                                    "under: --popsize 8 (the run has 4)",
                                            prepare=lambda run, work: edit_config(run, "es", "popsize", 8)),
     "another seed's config.json": Case(resume, "--seed 2 (the run has 1)", prepare=copy_config_of_seed(2)),
+    "machines an object in config.json": Case(resume, '"machines" must be a list of the machines it ran on (objects), '
+                                                      "got an object", prepare=edit_record("machines", {})),
+    "machines null in config.json": Case(resume, '"machines" must be a list', prepare=edit_record("machines", None)),
+    "resumed a string in config.json": Case(resume, '"resumed" must be a list of commands (strings), got a string',
+                                            prepare=edit_record("resumed", "x")),
+    "a config.json that is a list, evaluated": Case(evaluate(), "config.json is not a JSON object",
+                                                    prepare=write_config("[1, 2]")),
+    "a config.json that is a string, evaluated": Case(evaluate(), "config.json is not a JSON object",
+                                                      prepare=write_config('"x"')),
+    "a config.json that is a list, resumed": Case(resume, "config.json is not a JSON object",
+                                                  prepare=write_config("[1, 2]")),
+    # flags of a tracker or a backend the resumed run does not use
+    "--mlflow_uri on resume": Case(resume_with("--mlflow_uri", "sqlite:///x.db"),
+                                   "--mlflow_uri has an effect only with --logger mlflow"),
+    "--mlflow_experiment on resume": Case(resume_with("--mlflow_experiment", "x"),
+                                          "--mlflow_experiment has an effect only with --logger mlflow"),
+    "--wandb_project on resume": Case(resume_with("--wandb_project", "x"),
+                                      "--wandb_project has an effect only with --logger wandb"),
+    "--ray_address on resume": Case(resume_with("--ray_address", "auto"),
+                                    "--ray_address has an effect only with --backend ray"),
+    # loggers that cannot start: one line, and no run folder left behind
+    "--mlflow_uri of no store MLflow knows": Case(
+        new_run("--environment", "CartPole-v1", "--logger", "mlflow", "--mlflow_uri", "bogus://x"),
+        "--logger mlflow: ", modules=("mlflow",)),
+    "--mlflow_uri a bare path": Case(
+        new_run("--environment", "CartPole-v1", "--logger", "mlflow", "--mlflow_uri", lambda r, w: str(w / "mlruns")),
+        "--logger mlflow: ", env={"MLFLOW_ALLOW_FILE_STORE": None}, modules=("mlflow",)),
+    "--mlflow_uri a file that is not a database": Case(
+        new_run("--environment", "CartPole-v1", "--logger", "mlflow", "--mlflow_uri",
+                lambda r, w: f"sqlite:///{w / 'notes.db'}"),
+        "notes.db: the database cannot be opened (file is not a database)",
+        prepare=lambda run, work: (work / "notes.db").write_text("not a database\n" * 20), modules=("mlflow",)),
+    "WANDB_MODE of no such mode": Case(new_run("--environment", "CartPole-v1", "--logger", "wandb"),
+                                       "--logger wandb: WANDB_MODE=bogus: W&B has no such mode",
+                                       env={"WANDB_MODE": "bogus"}, modules=("wandb",)),
+    # the campaign's pid file is data; a budget too short for a chunk
+    "campaign.pid past the largest pid": Case(chunk(), "campaign.pid holds '99999999999', not the id of a process",
+                                              prepare=pid_file("99999999999\n")),
+    "campaign.pid holding -1": Case(chunk(), "campaign.pid holds '-1', not the id of a process this tool started; "
+                                             "if no campaign is running, remove it", prepare=pid_file("-1\n")),
+    "campaign.pid naming pid 1": Case(chunk(), "names process 1, which is not a campaign",
+                                      prepare=pid_file("1\n")),
+    "campaign.pid a folder": Case(chunk(), "campaign.pid is a folder, not the campaign's pid file",
+                                  prepare=pid_file(None)),
+    "--budget 0.001": Case(lambda run, work: chunk()(run, work)[:-2] + ["--budget", "0.001"],
+                           "--budget 0.001 leaves no time for a chunk"),
     # crafted checkpoints and run files
     "NaN in theta": Case(resume, "theta holds NaN",
                          prepare=lambda run, work: edit_checkpoint(run, theta=set_first(np.nan))),
@@ -503,7 +648,8 @@ def outcomes(run_folder, tmp_path_factory, request) -> dict[str, Outcome]:
 
 
 def runnable(case: Case) -> bool:
-    return (not case.extra or has_extra()) and (not case.mounts or can_mount())
+    return ((not case.extra or has_extra()) and (not case.mounts or can_mount())
+            and all(importlib.util.find_spec(module) is not None for module in case.modules))
 
 
 def kept(files: dict[str, str], case: Case) -> dict[str, str]:
@@ -516,12 +662,14 @@ def kept(files: dict[str, str], case: Case) -> dict[str, str]:
 def test_bad_input_is_one_line_exit_2_and_changes_nothing(name, outcomes):
     case = CASES[name]
     if not runnable(case):
-        pytest.skip(EXTRA_REASON if case.extra else "mounting a small filesystem needs root")
+        pytest.skip(EXTRA_REASON if case.extra else f"needs {', '.join(case.modules)}, an optional extra"
+                    if case.modules else "mounting a small filesystem needs root")
     result, work = outcomes[name].result, outcomes[name].work
     lines = result.stderr.splitlines()
     assert result.returncode == 2, (result.returncode, result.stdout[-2000:], result.stderr[-3000:])
     assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
     assert case.expect in lines[0], lines[0]
+    assert "kill" not in lines[0]  # a process is never advised to be signalled: no input names one this tool started
     assert ("resume with:" in result.stdout + result.stderr) == case.resumable, lines[0]
     assert not (work / MARKER).exists(), "the payload ran"
     assert kept(snapshot(work), case) == kept(outcomes[name].before, case)
