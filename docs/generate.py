@@ -227,8 +227,8 @@ def render_figures(text: str, page: Path, results: Path = records.RESULTS) -> st
 
 
 RUNS = ROOT / "results" / "paper"  # the campaign's run folders
-RESULT = re.compile(r"(?<!`)(<!-- (?P<what>result|spread|best):(?P<run>[\w.-]+)(?: (?P<environment>[\w.:-]+))? -->)"
-                    r"(?P<text>.*?)(?P<end><!-- end (?P=what) -->)")
+RESULT = re.compile(r"(?<!`)(<!-- (?P<what>result|headline|spread|best):(?P<run>[\w.-]+)"
+                    r"(?: (?P<environment>[\w.:-]+))? -->)(?P<text>.*?)(?P<end><!-- end (?P=what) -->)")
 FRAMES = re.compile(r"(?<!`)(<!-- frames:(?P<run>[\w.-]+) -->)(?P<text>.*?)(?P<end><!-- end frames -->)")
 REPORT = re.compile(r"(?<!`)(<!-- report:(?P<run>\w+) (?P<environment>[\w.:-]+) -->)(?P<text>.*?)"
                     r"(?P<end><!-- end report -->)")
@@ -292,6 +292,19 @@ def result(name: str, environment: str | None, page: Path, runs: Path = RUNS) ->
         raise FigureError(f"{name}: {run} is not a run this tool evaluated ({type(error).__name__}: {error})") from None
     return (f"{headline}, generation {progress.done} after {number(progress.hours)} h of training"
             + (f" on {progress.machines}" if progress.machines else "") + f", [weights]({link(run, page)}))")
+
+
+def headline(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
+    """One campaign run's evaluation in a few characters, for a table of results: "[**867 ± 130**](evaluation.json)"."""
+    found = evaluation_of(name, environment, runs)
+    if found is None:
+        return PENDING
+    run, _, entry = found
+    try:
+        return f"[**{number(entry['mean'])} ± {number(entry['std'])}**]({link(run / campaign.EVALUATION, page)})"
+    except (KeyError, TypeError, ValueError) as error:
+        raise FigureError(f"{name}: {run / campaign.EVALUATION} holds no mean and spread "
+                          f"({type(error).__name__}: {error})") from None
 
 
 def best(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
@@ -410,7 +423,7 @@ def render_results(text: str, page: Path, runs: Path = RUNS, behind: list[str] |
             rendered = pending
         return match[1] + rendered + match["end"]
 
-    writers = {"result": result, "spread": spread, "best": best}
+    writers = {"result": result, "headline": headline, "spread": spread, "best": best}
     text = RESULT.sub(lambda match: rewrite(match, writers[match["what"]](match["run"], match["environment"], page,
                                                                           runs), PENDING), text)
     text = FRAMES.sub(lambda match: rewrite(match, frames(match["run"], page, runs), FRAMES_PENDING), text)
