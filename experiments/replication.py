@@ -1,0 +1,593 @@
+#!/usr/bin/env python
+"""The replication report of Najarro & Risi (2020): one page, ``results/paper/REPLICATION.md``, generated.
+
+    python experiments/replication.py            # writes the page from the runs' files
+    python experiments/replication.py --check    # writes nothing; exit 1 if the page differs from what they give
+
+One row per claim of the paper: CarRacing, Hebbian against static; the quadruped on each body it trained on; on the
+body it never saw; and the Hebbian network's adaptation within an episode. Each row holds the figure cited for the
+paper (from secondary sources, unverified: docs/original.md), this tool's evidence, and a verdict decided by the rules
+below (``verdict_of``), with its reason in one sentence. Everything comes from files:
+
+- the campaign's reports (``experiments/paper.py EXPERIMENT report``, written by the campaign in
+  ``results/paper/<experiment>_report/<environment>/``): the runs, the IQM and the mean of each kind with their 95 %
+  bootstrap intervals, and P(X > Y) with its interval (summary.csv, improvement.csv, scores.csv);
+- each evaluated run's files (config.json, metrics.csv, evaluation.json, made_with.json): the runs table and the
+  compute each took;
+- the adaptation row: episodes of each Hebbian ant run's final weights (``last_coeffs.dat``) at the first seeds of
+  its evaluation, traced step by step (where the torso is, the norm of each layer's weights); the same numbers on
+  every CPU (docs/reproducibility.md);
+- the comparison with the environment the original ran (``experiments/original_ant.py``'s records in
+  ``results/original_ant/``).
+
+The verdict rules. A claim about two kinds ("X scores higher than Y") is *reproduced* where the lower end of P(X > Y)'s
+interval is above 0.5, *not reproduced* where its upper end is below 0.5, and *not yet decided* otherwise. A cited
+figure m ± s of one kind is *reproduced* where m lies within the interval of that kind's mean over runs, *not
+reproduced* where that interval does not meet [m - s, m + s], and *not yet decided* otherwise. The adaptation claim is
+*reproduced* where on every body most Hebbian runs walk from step 100 (``walks``), *not reproduced* where on some body
+most do not. Any claim is *not yet decided* with fewer than ``MIN_RUNS`` runs of a kind it needs; a row's verdict is
+*not reproduced* if any of its parts is, *reproduced* if all are.
+
+A run evaluated since the page was written makes ``--check`` say the page is behind (exit 0), as docs/generate.py
+does with the docs' campaign results: the campaign writes its files as it goes; ``python experiments/replication.py``
+catches the page up.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import re
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+if str(ROOT) not in sys.path:  # run as a script
+    sys.path.insert(0, str(ROOT))
+RUNS = ROOT / "results" / "paper"
+PAGE_NAME = "REPLICATION.md"
+ORIGINAL_RECORDS = ROOT / "results" / "original_ant"
+EVALUATION, MADE_WITH = "evaluation.json", "made_with.json"
+
+MIN_RUNS = 3  # runs of each kind a claim needs before any verdict: one run cannot be told from its seed's luck
+REPRODUCED, NOT_REPRODUCED, UNDECIDED = "reproduced", "not reproduced", "not yet decided"
+# the adaptation row: "learns to walk ... in less than 100 timesteps" (the paper's abstract)
+WALK_FROM = 100  # the policy step by which the network is to walk
+WALK_UNTIL = 200  # ... judged over the steps that follow, up to this one
+WALK_DISTANCE = 0.5  # metres forward over those steps (the shipped Hebbian ant walks about 1.7 m per 100 steps)
+ALIVE_HEIGHT = 0.26  # metres: pyBullet's ant is alive while its torso is higher (a lower torso ends an episode)
+TRACE_EPISODES = 3  # episodes traced per run and body: the evaluation's first seeds
+ANT_BODIES = ("AntBulletEnv-v0", "AntAsymRightBulletEnv-v0", "AntAsymLeftBulletEnv-v0")
+BODY_NAMES = {"AntBulletEnv-v0": "standard", "AntAsymRightBulletEnv-v0": "right-damaged (seen)",
+              "AntAsymLeftBulletEnv-v0": "left-damaged (unseen)"}
+KIND_NAMES = {"static": "static", "hebbian": "Hebbian"}
+
+
+class ReplicationError(ValueError):
+    """A file of the campaign that cannot be read as a run or a report; names it."""
+
+
+# --- the claims ------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Cited:
+    """A figure cited for the paper: one kind's mean ± spread."""
+    kind: str
+    mean: float
+    spread: float
+
+
+@dataclass(frozen=True)
+class Claim:
+    what: str  # the claim, in words
+    paper: str  # what is cited for the paper
+    experiment: str  # the campaign's experiment: its report is results/paper/<experiment>_report/<environment>/
+    environment: str
+    higher: tuple[str, str] | None = None  # (X, Y): the paper has X scoring higher than Y
+    cited: tuple[Cited, ...] = ()
+
+
+ANT_SEEN = (Cited("static", 1604, 171), Cited("hebbian", 1051, 113))
+CLAIMS = (
+    Claim("CarRacing: the Hebbian network drives better than the static one",
+          "Hebbian 872 ± 11, static 711 ± 16 (100 rollouts)", "carracing", "CarRacing-v3", ("hebbian", "static"),
+          (Cited("hebbian", 872, 11), Cited("static", 711, 16))),
+    Claim("The quadruped on its standard body (trained on): the static network walks further than the Hebbian one",
+          "static 1604 ± 171, Hebbian 1051 ± 113 (the source does not say which body it trained on)", "ant",
+          "AntBulletEnv-v0", ("static", "hebbian"), ANT_SEEN),
+    Claim("The quadruped on its right-damaged body (trained on): the static network walks further",
+          "the same figures, for a body trained on", "ant", "AntAsymRightBulletEnv-v0", ("static", "hebbian"),
+          ANT_SEEN),
+    Claim("The quadruped on its left-damaged body (never seen): the Hebbian network walks further than the static one",
+          "no figure cited; the Hebbian network better on this body only", "ant", "AntAsymLeftBulletEnv-v0",
+          ("hebbian", "static")),
+)
+ADAPTATION = ("Within an episode, the Hebbian network goes from random weights to walking in less than 100 steps, on "
+              "each body", "\"in less than 100 timesteps\" (abstract)")
+
+
+# --- the campaign's files ---------------------------------------------------------------------------------------
+
+
+def read_csv(path: Path) -> list[dict]:
+    try:
+        with path.open(newline="") as handle:
+            return list(csv.DictReader(handle))
+    except (OSError, csv.Error, UnicodeDecodeError) as error:
+        raise ReplicationError(f"{path}: unreadable ({error})") from None
+
+
+def read_json(path: Path) -> dict:
+    try:
+        value = json.loads(path.read_text())
+    except (OSError, ValueError) as error:
+        raise ReplicationError(f"{path}: unreadable ({error})") from None
+    if not isinstance(value, dict):
+        raise ReplicationError(f"{path}: not a JSON object")
+    return value
+
+
+@dataclass(frozen=True)
+class Group:
+    """One kind's line of a report's summary.csv."""
+    kind: str
+    runs: int
+    iqm: tuple[float, float, float]  # estimate, low, high
+    mean: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Report:
+    folder: Path
+    groups: dict[str, Group]
+    better: dict[tuple[str, str], tuple[float, float, float]]  # (X, Y) -> P(X > Y), low, high
+
+
+def read_report(runs: Path, experiment: str, environment: str) -> Report | None:
+    """The campaign's report of ``experiment`` on ``environment``; None where there is none yet."""
+    folder = runs / f"{experiment}_report" / environment
+    if not (folder / "summary.csv").is_file():
+        return None
+    try:
+        groups = {row["group"]: Group(row["group"], int(row["runs"]),
+                                      tuple(float(row[key]) for key in ("iqm", "iqm_low", "iqm_high")),
+                                      tuple(float(row[key]) for key in ("mean", "mean_low", "mean_high")))
+                  for row in read_csv(folder / "summary.csv")}
+        better = {(row["x"], row["y"]): tuple(float(row[key]) for key in ("probability", "low", "high"))
+                  for row in read_csv(folder / "improvement.csv")}
+    except (KeyError, ValueError) as error:
+        raise ReplicationError(f"{folder}: not a report of the campaign ({type(error).__name__}: {error})") from None
+    return Report(folder, groups, better)
+
+
+@dataclass(frozen=True)
+class Run:
+    """An evaluated run of the campaign: the newest run folder of ``results/paper/<experiment>_<kind>_seed<N>``."""
+    name: str  # the seed folder's: ant_hebbian_seed1
+    folder: Path
+    experiment: str
+    kind: str
+    seed: int
+    config: dict
+    evaluation: dict
+    made_with: dict | None
+
+    def metrics(self) -> list[dict]:
+        return read_csv(self.folder / "metrics.csv")
+
+
+SEED_FOLDER = re.compile(r"(?P<experiment>[a-z0-9]+)_(?P<kind>static|hebbian)_seed(?P<seed>\d+)")
+
+
+def evaluated_runs(runs: Path) -> list[Run]:
+    """The campaign's evaluated runs, by experiment, kind and seed."""
+    found = []
+    for seed_folder in sorted(runs.iterdir()) if runs.is_dir() else []:
+        match = SEED_FOLDER.fullmatch(seed_folder.name)
+        if not match or not seed_folder.is_dir():
+            continue
+        candidates = sorted(path for path in seed_folder.iterdir() if (path / "config.json").is_file())
+        if not candidates or not (candidates[-1] / EVALUATION).is_file():
+            continue
+        folder = candidates[-1]
+        made_with = read_json(folder / MADE_WITH) if (folder / MADE_WITH).is_file() else None
+        found.append(Run(seed_folder.name, folder, match["experiment"], match["kind"], int(match["seed"]),
+                         read_json(folder / "config.json"), read_json(folder / EVALUATION), made_with))
+    return sorted(found, key=lambda run: (run.experiment, run.kind != "hebbian", run.seed))
+
+
+# --- the verdicts --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Verdict:
+    status: str
+    reason: str
+
+
+def too_few(report: Report, kinds: tuple[str, ...]) -> Verdict | None:
+    counts = {kind: report.groups[kind].runs if kind in report.groups else 0 for kind in kinds}
+    short = {kind: count for kind, count in counts.items() if count < MIN_RUNS}
+    if not short:
+        return None
+    named = ", ".join(f"{count} {KIND_NAMES[kind]} run{'s' * (count != 1)}" for kind, count in short.items())
+    return Verdict(UNDECIDED, f"{named} evaluated so far; a verdict needs at least {MIN_RUNS} runs of each kind, so "
+                              "that a seed's luck cannot decide it")
+
+
+def higher_verdict(report: Report, higher: tuple[str, str]) -> Verdict:
+    x, y = higher
+    probability, low, high = report.better[x, y]
+    said = f"P({KIND_NAMES[x]} > {KIND_NAMES[y]}) is {probability:.2f} [{low:.2f}, {high:.2f}]"
+    if low > 0.5:
+        return Verdict(REPRODUCED, f"{said}: the {KIND_NAMES[x]} runs score higher")
+    if high < 0.5:
+        return Verdict(NOT_REPRODUCED, f"{said}: the {KIND_NAMES[y]} runs score higher")
+    return Verdict(UNDECIDED, f"{said}; the interval holds 0.5, so the runs do not rank the kinds")
+
+
+def level_verdict(report: Report, cited: Cited) -> Verdict:
+    mean, low, high = report.groups[cited.kind].mean
+    said = (f"the {KIND_NAMES[cited.kind]} runs' mean {mean:.0f} [{low:.0f}, {high:.0f}] against the cited "
+            f"{cited.mean:.0f} ± {cited.spread:.0f}")
+    if low <= cited.mean <= high:
+        return Verdict(REPRODUCED, f"{said}: the cited figure lies within the interval")
+    if high < cited.mean - cited.spread or low > cited.mean + cited.spread:
+        return Verdict(NOT_REPRODUCED, f"{said}: the interval is {'below' if high < cited.mean else 'above'} it")
+    return Verdict(UNDECIDED, f"{said}: the interval reaches the cited range but not the figure")
+
+
+def combined(parts: list[Verdict]) -> Verdict:
+    """A row's verdict: not reproduced if any part is, reproduced if all are, else not yet decided; the reason of the
+    part that decides."""
+    for status in (NOT_REPRODUCED, UNDECIDED):
+        deciding = [part for part in parts if part.status == status]
+        if deciding:
+            return Verdict(status, "; ".join(part.reason for part in deciding))
+    return Verdict(REPRODUCED, "; ".join(part.reason for part in parts))
+
+
+def verdict_of(claim: Claim, report: Report | None) -> Verdict:
+    if report is None:
+        return Verdict(UNDECIDED, "no run of this experiment has been evaluated yet")
+    kinds = tuple(dict.fromkeys([*(claim.higher or ()), *(cited.kind for cited in claim.cited)]))
+    short = too_few(report, kinds)
+    if short is not None:
+        return short
+    parts = ([higher_verdict(report, claim.higher)] if claim.higher else []) + \
+            [level_verdict(report, cited) for cited in claim.cited]
+    return combined(parts)
+
+
+# --- the adaptation within an episode ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Trace:
+    """One traced episode: how it went from step ``WALK_FROM`` on, and how far the weights had turned by then."""
+    seed: int
+    steps: int  # policy steps
+    forward: float  # metres walked forward over steps WALK_FROM + 1 to WALK_UNTIL
+    lowest: float  # the torso's lowest height over those steps (0 where the episode ended before WALK_UNTIL)
+    turned: float  # the lowest, over the layers, cosine between the weights after step WALK_FROM and at the end
+
+    @property
+    def walks(self) -> bool:
+        """Walking from step WALK_FROM: the torso up and going forward over the next hundred steps."""
+        return self.steps >= WALK_UNTIL and self.lowest > ALIVE_HEIGHT and self.forward >= WALK_DISTANCE
+
+
+def cosine(weights: list[np.ndarray], final: list[np.ndarray]) -> float:
+    """The lowest, over the layers, cosine between two sets of a network's weights (float64 sums)."""
+    return min(float(np.sum(w.astype(np.float64) * f) / (np.linalg.norm(w.astype(np.float64)) *
+                                                           np.linalg.norm(f.astype(np.float64))))
+               for w, f in zip(weights, final))
+
+
+def trace_run(run: Run) -> dict[str, list[Trace]]:
+    """Episodes of a Hebbian ant run's final weights on each body, at its evaluation's first seeds."""
+    from cli.config import TrainConfig
+    from envs import ProblemSpec, rollout
+    from envs.evaluation import track_torso
+    from es.files import load_dat
+    from es.runfolder import named_file
+
+    config = TrainConfig.from_dict(run.config, str(run.folder / "config.json"))
+    problem = ProblemSpec(ANT_BODIES, config.policy).build()
+    try:
+        policy = problem.policy
+        params = policy.load({policy.roles[0]: load_dat(run.folder / named_file("last", policy.roles[0]))})
+        traces = {}
+        for env, body in zip(problem.envs, ANT_BODIES):
+            tracker = track_torso(env)
+            traces[body] = []
+            for seed in range(int(run.evaluation["seed"]), int(run.evaluation["seed"]) + TRACE_EPISODES):
+                forward, heights, early = [], [], []
+
+                def observe(t, reward, state, info, tracker=tracker, forward=forward, heights=heights, early=early):
+                    forward.append(tracker.forward)
+                    heights.append(float(tracker.unwrapped.robot.body_real_xyz[2]))
+                    if t == WALK_FROM:
+                        early.extend(weights.copy() for weights in policy.layer_weights(state))
+
+                episode = rollout(tracker, policy, params, seed, observe)
+                steps = len(forward)
+                whole = steps >= WALK_UNTIL
+                traces[body].append(Trace(
+                    seed, steps, forward[WALK_UNTIL - 1] - forward[WALK_FROM - 1] if whole else 0.0,
+                    min(heights[WALK_FROM:WALK_UNTIL]) if whole else 0.0,
+                    cosine(early, policy.layer_weights(episode.state)) if early else 0.0))
+        return traces
+    finally:
+        problem.close()
+
+
+def adaptation_verdict(traces: dict[str, dict[str, list[Trace]]]) -> Verdict:
+    """``traces``: run -> body -> its episodes. A run walks on a body where most of its episodes walk."""
+    if len(traces) < MIN_RUNS:
+        count = len(traces)
+        return Verdict(UNDECIDED, f"{count} Hebbian run{'s' * (count != 1)} of the quadruped evaluated so far; a "
+                                  f"verdict needs at least {MIN_RUNS}")
+    failing = []
+    for body in ANT_BODIES:
+        walking = sum(2 * sum(trace.walks for trace in runs[body]) > len(runs[body]) for runs in traces.values())
+        if 2 * walking <= len(traces):
+            failing.append(f"on the {BODY_NAMES[body]} body {walking} of {len(traces)} runs walk from step {WALK_FROM}")
+    if failing:
+        return Verdict(NOT_REPRODUCED, "; ".join(failing))
+    return Verdict(REPRODUCED, f"on every body most runs walk from step {WALK_FROM}")
+
+
+# --- the page ------------------------------------------------------------------------------------------------
+
+
+def estimate(values: tuple[float, float, float], runs: int) -> str:
+    value, low, high = values
+    return f"{value:.1f}" if runs == 1 else f"{value:.1f} [{low:.1f}, {high:.1f}]"
+
+
+def evidence(claim: Claim, report: Report | None, page: Path) -> str:
+    if report is None:
+        return "no evaluated run yet"
+    cells = []
+    for kind in ("hebbian", "static"):
+        group = report.groups.get(kind)
+        if group is not None:
+            cells.append(f"{KIND_NAMES[kind]}: {group.runs} run{'s' * (group.runs != 1)}, IQM "
+                         f"{estimate(group.iqm, group.runs)}, mean {estimate(group.mean, group.runs)}")
+    if claim.higher and claim.higher in report.better:
+        x, y = claim.higher
+        probability, low, high = report.better[x, y]
+        cells.append(f"P({KIND_NAMES[x]} > {KIND_NAMES[y]}) {probability:.2f} [{low:.2f}, {high:.2f}]")
+    link = (report.folder / "summary.md").relative_to(page.parent).as_posix()
+    return "; ".join(cells) + f" ([report]({link}))"
+
+
+def adaptation_evidence(traces: dict[str, dict[str, list[Trace]]]) -> str:
+    if not traces:
+        return "no evaluated Hebbian run of the quadruped yet"
+    cells = []
+    for body in ANT_BODIES:
+        episodes = [trace for runs in traces.values() for trace in runs[body]]
+        walking = sum(trace.walks for trace in episodes)
+        turned = float(np.median([trace.turned for trace in episodes]))
+        cells.append(f"{BODY_NAMES[body]}: {walking} of {len(episodes)} episodes walk from step {WALK_FROM}, the "
+                     f"weights at step {WALK_FROM} at cosine {turned:.2f} with their last (median)")
+    runs = len(traces)
+    return (f"{runs} run{'s' * (runs != 1)}, {TRACE_EPISODES} episodes per body: " + "; ".join(cells))
+
+
+def hours(run: Run) -> tuple[float, int, int]:
+    """Training time (hours of wall clock), environment steps and generations, from metrics.csv."""
+    rows = run.metrics()
+    try:
+        return (sum(float(row["seconds"]) for row in rows) / 3600, sum(int(row["env_steps"]) for row in rows),
+                len(rows))
+    except (KeyError, ValueError) as error:
+        raise ReplicationError(f"{run.folder / 'metrics.csv'}: unreadable ({type(error).__name__}: {error})") from None
+
+
+def runs_table(runs: list[Run], page: Path) -> list[str]:
+    from report.machine import machines_text
+
+    lines = ["| run | generations | evaluation: mean ± std (episodes) | training | environment steps | machine |",
+             "|---|---|---|---|---|---|"]
+    notes = []
+    for run in runs:
+        wall, steps, generations = hours(run)
+        scores = "; ".join(f"{BODY_NAMES.get(entry['environment'], entry['environment'])} {entry['mean']:.1f} ± "
+                           f"{entry['std']:.1f} ({entry['episodes']})" for entry in run.evaluation["environments"])
+        workers = {entry.get("workers") for entry in run.config.get("machines", [])} - {None}
+        worker_text = f" × {workers.pop()} workers" if len(workers) == 1 else ""
+        name = f"[{run.name}]({run.folder.relative_to(page.parent).as_posix()})"
+        if run.made_with is not None:
+            notes.append(run)
+            name += f" [^{run.name}]"
+        lines.append(f"| {name} | {generations} of {run.config['run']['generations']} | {scores} | {wall:.2f} h"
+                     f"{worker_text} | {steps:,} | {machines_text(run.config.get('machines', []))} |")
+    lines.append("")
+    for run in notes:
+        lines.append(f"[^{run.name}]: Made with commit {run.made_with.get('commit', '?')[:12]}; its generations "
+                     f"come again on {run.made_with.get('reproduces_on', '?')}: {run.made_with.get('why', '')}.")
+    return lines
+
+
+def compute_lines(runs: list[Run]) -> list[str]:
+    totals: dict[tuple[str, str], list[float]] = {}
+    for run in runs:
+        wall, steps, _ = hours(run)
+        workers = max([entry.get("workers", 1) for entry in run.config.get("machines", [])] or [1])
+        totals.setdefault((run.experiment, run.kind), []).append(wall * workers)
+    return [f"- {experiment}, {KIND_NAMES[kind]}: {len(values)} run{'s' * (len(values) != 1)}, "
+            f"{sum(values):.1f} core-hours in all ({min(values):.1f} to {max(values):.1f} each)"
+            for (experiment, kind), values in totals.items()]
+
+
+def original_lines(records: Path, page: Path) -> list[str]:
+    """The comparison with the environment the original ran, from experiments/original_ant.py's records: what the
+    same actions gave, step by step, and the shipped agents' scores on both (a list, then a table)."""
+    files = sorted(records.glob("*.json")) if records.is_dir() else []
+    if not files:
+        return ["- No record of `experiments/original_ant.py` yet.", ""]
+    lines, scored = [], {}
+    for file in files:
+        record = read_json(file)
+        code = {key: value for key, value in record.get("cpu_code", {}).items() if value}
+        how = (f"the code numpy and OpenBLAS take on an AVX2 CPU ({', '.join(f'{k}={v}' for k, v in code.items())})"
+               if code else "numpy's and OpenBLAS's own choice of code for this CPU")
+        link = Path(os.path.relpath(file, page.parent)).as_posix()
+        lockstep = record.get("lockstep", [])
+        port = [entry for entry in lockstep if entry["against"] == "port"]
+        batched = [entry for entry in lockstep if entry["against"] == "batched"]
+        parted = sorted({entry["first_difference"] for entry in batched if entry["first_difference"] is not None})
+        agree = "at every step" if all(entry["first_difference"] is None for entry in port) else "not at every step"
+        batched_text = ("so does the batched class" if not parted else
+                        f"the batched class parts from it, in last bits, at step {parted[0]}"
+                        + (f" to {parted[-1]}" if len(parted) > 1 else ""))
+        lines.append(f"- [{file.stem}]({link}), on {record.get('cpu', '?')} with {how}, gym "
+                     f"{record.get('versions', {}).get('gym', '?')}: the same actions from the same reset "
+                     f"({len(port)} episodes, random, static and Hebbian actions on the three bodies, "
+                     f"{sum(entry['steps'] for entry in port):,} policy steps): pyBullet's port gives the original's "
+                     f"observations, progress rewards and ends {agree}; {batched_text}; the first observation differs "
+                     f"in the sine of the angle to the target alone, by at most "
+                     f"{max(entry['reset_difference'] for entry in lockstep):.1e}.")
+        for scores in record.get("scores", []):
+            scored.setdefault((scores["kind"], scores["run"], scores["environment"]), []).append((file.stem, scores))
+    if not scored:
+        return [*lines, ""]
+    spread = max(float(np.max(np.abs(np.array(a["original"]) - np.array(b["original"]))))
+                 for entries in scored.values() for _, a in entries for _, b in entries)
+    episodes = len(next(iter(scored.values()))[0][1]["seeds"])
+    lines += ["", f"Each shipped agent on both, from the same resets ({episodes} episodes); the original's returns in "
+                  f"the records differ by at most {spread:.1e}:", "",
+              "| agent | body | the original's environment | this tool | this tool − original (95 %) | equal returns |",
+              "|---|---|---|---|---|---|"]
+    for (kind, run, environment), entries in scored.items():
+        scores = entries[0][1]
+        original, tool = np.array(scores["original"]), np.array(scores["tool"])
+        difference = tool - original
+        low, high = paired_interval(difference)
+        equal = ", ".join(f"{int(np.sum(np.array(s['original']) == np.array(s['tool'])))} ({name})"
+                          for name, s in entries)
+        body = BODY_NAMES.get(environment, environment)
+        lines.append(f"| {KIND_NAMES.get(kind, kind)}, seed {seed_of(run)} | {body} | {original.mean():.1f} ± "
+                     f"{original.std():.1f} | {tool.mean():.1f} ± {tool.std():.1f} | {difference.mean():+.1f} "
+                     f"[{low:+.1f}, {high:+.1f}] | {equal} |")
+    return [*lines, ""]
+
+
+def seed_of(run: str) -> str:
+    match = re.search(r"_seed(\d+)", run)
+    return match[1] if match else "?"
+
+
+def paired_interval(differences: np.ndarray, resamples: int = 10_000, seed: int = 0) -> tuple[float, float]:
+    """A 95 % percentile bootstrap interval of the mean of paired differences (experiments/original_ant.py's)."""
+    rng = np.random.default_rng(seed)
+    means = differences[rng.integers(0, differences.size, (resamples, differences.size))].mean(axis=1)
+    return float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))
+
+
+def render(runs_root: Path = RUNS, records: Path = ORIGINAL_RECORDS) -> str:
+    page = runs_root / PAGE_NAME
+    runs = evaluated_runs(runs_root)
+    rows = []
+    for claim in CLAIMS:
+        report = read_report(runs_root, claim.experiment, claim.environment)
+        verdict = verdict_of(claim, report)
+        rows.append(f"| {claim.what} | {claim.paper} | {evidence(claim, report, page)} | **{verdict.status}**: "
+                    f"{verdict.reason}. |")
+    hebbian_ants = [run for run in runs if run.experiment == "ant" and run.kind == "hebbian"]
+    traces = {run.name: trace_run(run) for run in hebbian_ants}
+    verdict = adaptation_verdict(traces)
+    rows.append(f"| {ADAPTATION[0]} | {ADAPTATION[1]} | {adaptation_evidence(traces)} | **{verdict.status}**: "
+                f"{verdict.reason}. |")
+    lines = [
+        "# Replicating Najarro & Risi (2020)", "",
+        "[← README](../../README.md) · generated by `python experiments/replication.py` from the campaign's files "
+        "(do not edit: `python experiments/replication.py --check` compares)", "",
+        "The figures cited for the paper come from secondary sources and are **unverified**: the paper's tables could "
+        "not be read here ([docs/original.md](../../docs/original.md#the-papers-settings-and-figures)). This tool's "
+        "evidence is the campaign's runs, at the paper's settings, each evaluated on the same 100 held-out episodes "
+        "per environment; the intervals are 95 % stratified bootstrap intervals over the runs "
+        "([report/stats.py](../../report/stats.py)).", "",
+        "## The claims", "",
+        "| claim | cited for the paper (unverified) | this tool's evidence | verdict |", "|---|---|---|---|",
+        *rows, "",
+        "How a verdict is decided: a claim that one kind scores higher is reproduced where the lower end of "
+        "P(X > Y)'s interval is above 0.5, not reproduced where its upper end is below 0.5; a cited figure m ± s is "
+        "reproduced where m lies within the interval of that kind's mean over runs, not reproduced where the interval "
+        "misses [m − s, m + s]; anything else, and any claim with fewer than "
+        f"{MIN_RUNS} runs of a kind it needs, is not yet decided. The adaptation row traces {TRACE_EPISODES} episodes "
+        "per body of each Hebbian run's final weights (the first seeds of its evaluation): an episode walks from step "
+        f"{WALK_FROM} where over steps {WALK_FROM + 1} to {WALK_UNTIL} the torso stays above {ALIVE_HEIGHT} m and "
+        f"moves at least {WALK_DISTANCE} m forward; a run walks on a body where most of its episodes do, and the claim "
+        "is reproduced where most runs walk on every body. The rules are code: "
+        "[experiments/replication.py](../../experiments/replication.py).", "",
+        "## The runs", "",
+        *runs_table(runs, page), "",
+        f"<!-- runs: {' '.join(run.name for run in runs)} -->", "",
+        "## The checks behind it", "",
+        "- **Gymnasium's and pyBullet's own classes give the same episodes.** The CarRacing this tool steps is a "
+        "faster class that returns Gymnasium's `CarRacing-v3` observations, rewards and ends bit for bit "
+        "(tests/test_car_racing.py steps both side by side; `CarRacingStock-v3` makes Gymnasium's own); the "
+        "quadruped's batched class returns pyBullet's (tests/test_bullet_locomotion.py, with an AVX2 CPU's code, "
+        "which the batched class computes as on every CPU).",
+        "- **The compute each run took**, from its metrics.csv (wall-clock hours times the workers):",
+        *("  " + line for line in compute_lines(runs)), "",
+        "### The environment the original ran", "",
+        "pyBullet's gym-based `pybullet_envs`, stepped as the original's fitness function stepped it, beside this "
+        "tool's bodies ([docs/original.md](../../docs/original.md#the-originals-quadruped-side-by-side); "
+        "`experiments/original_ant.py`, tests/test_original_ant.py):", "",
+        *original_lines(records, page),
+    ]
+    return "\n".join(lines)
+
+
+def covered(text: str) -> set[str]:
+    """The runs a page was written from (its ``<!-- runs: ... -->`` line)."""
+    match = re.search(r"<!-- runs: (.*?) -->", text)
+    return set(match[1].split()) if match else set()
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="experiments/replication.py", description=__doc__.splitlines()[0])
+    parser.add_argument("--check", action="store_true",
+                        help="write nothing; exit 1 if the page differs from what the files give")
+    parser.add_argument("--runs", type=Path, default=RUNS, metavar="DIR",
+                        help=f"the campaign's folder; the page is DIR/{PAGE_NAME} (default: results/paper)")
+    parser.add_argument("--records", type=Path, default=ORIGINAL_RECORDS, metavar="DIR",
+                        help="experiments/original_ant.py's records (default: results/original_ant)")
+    args = parser.parse_args(argv)
+    page = args.runs / PAGE_NAME
+    try:
+        if not args.runs.is_dir():
+            raise ReplicationError(f"--runs {args.runs}: not a folder")
+        generated = render(args.runs, args.records)
+    except ReplicationError as error:
+        print(f"{parser.prog}: error: {error}", file=sys.stderr)
+        return 2
+    current = page.read_text() if page.is_file() else None
+    if not args.check:
+        if current != generated:
+            page.write_text(generated)
+            print(f"wrote {page}")
+        return 0
+    if current == generated:
+        return 0
+    newer = covered(generated) - covered(current or "")
+    if current is not None and newer and covered(current) <= covered(generated):
+        print(f"{page} is behind the runs evaluated since it was written ({', '.join(sorted(newer))}); "
+              "python experiments/replication.py catches it up")
+        return 0
+    print(f"{page} differs from what the runs' files give; python experiments/replication.py rewrites it")
+    return 1
+
+if __name__ == "__main__":
+    sys.exit(main())
