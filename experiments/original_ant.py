@@ -37,6 +37,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from envs import damaged, episode_rng, make_env, quiet_output
+from settings import EPISODE_SEED_RANGE
 
 BODIES = ("AntBulletEnv-v0", "AntAsymRightBulletEnv-v0", "AntAsymLeftBulletEnv-v0")  # the paper's three
 EXTRA = "the original extra (an old gym for pyBullet's pybullet_envs): pip install -r requirements-original.txt"
@@ -220,7 +221,10 @@ def load_agent(path: str | Path) -> Agent:
     from es.runfolder import named_file
 
     run = run_folder(path)
-    config = TrainConfig.from_dict(read_json(run / "config.json"), str(run / "config.json"))
+    try:
+        config = TrainConfig.from_dict(read_json(run / "config.json"), str(run / "config.json"))
+    except TypeError as error:  # a JSON value of another shape
+        raise ValueError(f"{run / 'config.json'}: unreadable ({error})") from None
     if not set(config.env.env_ids) <= set(BODIES):
         raise ValueError(f"{run} trained on {', '.join(config.env.env_ids)}; this compares the quadrupeds "
                          f"{', '.join(BODIES)}")
@@ -378,8 +382,15 @@ def main(argv: list[str] | None = None) -> int:
         unknown = [body for body in bodies if body not in BODIES]
         if unknown:
             raise ValueError(f"--environment {unknown[0]}: unknown quadruped; valid: {', '.join(BODIES)}")
+        low, high = EPISODE_SEED_RANGE
+        if not low <= args.seed <= args.seed + args.episodes - 1 <= high:
+            raise ValueError(f"--seed {args.seed} with --episodes {args.episodes}: the episodes' seeds must lie "
+                             f"from {low} to {high}")
         if args.json and Path(args.json).exists():
             raise ValueError(f"--json {args.json} exists; give a new file")
+        if args.json and not Path(args.json).resolve().parent.is_dir():
+            raise ValueError(f"--json {args.json}: no folder {Path(args.json).parent}; give a file in a folder that "
+                             "exists")
         original_gym()
         agents = [load_agent(run) for run in args.runs]
     except (ValueError, OriginalUnavailable) as error:
@@ -401,8 +412,12 @@ def main(argv: list[str] | None = None) -> int:
             print(summary_line(agent, scores), flush=True)
             records.append({"run": str(agent.run), "kind": agent.kind, **scores})
     if args.json:
-        Path(args.json).write_text(json.dumps({**provenance(argv), "episodes": args.episodes, "seed": args.seed,
-                                               "lockstep": lockstep, "scores": records}, indent=1) + "\n")
+        try:
+            Path(args.json).write_text(json.dumps({**provenance(argv), "episodes": args.episodes, "seed": args.seed,
+                                                   "lockstep": lockstep, "scores": records}, indent=1) + "\n")
+        except OSError as error:
+            print(f"{parser.prog}: error: --json {args.json}: {error.strerror or error}", file=sys.stderr)
+            return 2
     return 0
 
 if __name__ == "__main__":

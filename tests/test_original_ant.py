@@ -132,6 +132,8 @@ def test_the_script_scores_an_agent_on_both_and_refuses_bad_input(tmp_path):
     for argv, message in ((["--episodes", "0"], "--episodes 0: give a whole number of at least 1"),
                           (["--environment", "Ant-v5"], "--environment Ant-v5: unknown quadruped"),
                           (["--json", str(out)], f"--json {out} exists"),
+                          (["--seed", "-1"], "--seed -1 with --episodes 20: the episodes' seeds must lie from 0"),
+                          (["--json", str(tmp_path / "no" / "x.json")], "no folder"),
                           ([str(tmp_path)], f"{tmp_path} is not a run folder")):
         runs = [] if argv[0].startswith("/") else [str(RUNS["static"])]
         done = subprocess.run([*script, *runs, *argv], cwd=ROOT, capture_output=True, text=True, timeout=600)
