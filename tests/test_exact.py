@@ -10,6 +10,7 @@ import decimal
 import hashlib
 import math
 import os
+import platform
 import subprocess
 import sys
 import warnings
@@ -186,6 +187,23 @@ def bits_digest() -> str:
     return digest.hexdigest()
 
 
+def c_library_digest() -> str:
+    """A digest of the C library's exp (Python's math) over the same kind of inputs."""
+    values = np.random.default_rng(9).uniform(-700.0, 700.0, 20_000).tolist()
+    return hashlib.sha256(np.array([math.exp(value) for value in values]).tobytes()).hexdigest()
+
+
+def glibc_with_fma() -> bool:
+    """glibc on x86-64 taking its functions' FMA code: a CPU with FMA and AVX2, nothing masked."""
+    try:
+        flags = set(next(line.split(":", 1)[1].split() for line in Path("/proc/cpuinfo").read_text().splitlines()
+                         if line.startswith("flags")))
+    except (OSError, StopIteration):
+        return False
+    return (platform.libc_ver()[0] == "glibc" and platform.machine() == "x86_64" and {"fma", "avx2"} <= flags
+            and "glibc.cpu.hwcaps" not in os.environ.get("GLIBC_TUNABLES", ""))
+
+
 # the code paths a CPU without AVX-512, or without FMA and AVX2, makes numpy and the C library take
 PATHS = {
     "numpy without AVX-512": {"NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR"},
@@ -196,10 +214,15 @@ PATHS = {
 
 def test_the_same_bits_on_the_c_librarys_and_numpys_other_paths():
     """Each path in a child process (glibc reads its tunables when a program starts): the digest of this one.
-    The C library's own exp gives other bits there (the module's docstring)."""
-    code = "from tests.test_exact import bits_digest; print(bits_digest())"
+    Where glibc runs its FMA code here, its own exp gives other bits on the path without FMA: the path is
+    taken, and the C library's functions could not stand in for these."""
+    code = ("from tests.test_exact import bits_digest, c_library_digest; print(bits_digest()); "
+            "print(c_library_digest())")
     for name, env in PATHS.items():
         done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env={**os.environ, **env},
                               capture_output=True, text=True, timeout=300)
         assert done.returncode == 0, done.stderr[-3000:]
-        assert done.stdout.strip().splitlines()[-1] == bits_digest(), name
+        ours, c_library = done.stdout.strip().splitlines()[-2:]
+        assert ours == bits_digest(), name
+        if "GLIBC_TUNABLES" in env and glibc_with_fma():
+            assert c_library != c_library_digest(), name
