@@ -6,9 +6,9 @@ Hydra's structured configs). Everything else about the option is derived from th
 - the TOML keys of an experiment file and ``config.json`` in both directions (``cli.config``);
 - the checks (``check``, called by each dataclass's ``__post_init__``), one line naming the flag;
 - the "has an effect only with" rules (``requires``), the settings a ``--resume`` may change
-  (``resumable``), the settings the evaluate scripts take from a run (``evaluation``), and the policy
-  kinds a setting applies to (``applies``: a setting that does not apply to a run is neither recorded
-  in its config.json nor accepted from a flag or a file).
+  (``resumable``), and the settings the evaluate scripts take from a run (``evaluation``);
+- for a plug-in's setting (``plugins``: a strategy's, a logger's, a policy kind's), its owner: it has an
+  effect only with its plug-in chosen, and a run records it only then (``chosen``).
 
 This module imports nothing of the project, so that every package (``es``, ``policies``, ``envs``) can
 declare its settings with it. To add an option, add one field, e.g. to ``es.settings.ESSettings``:
@@ -30,13 +30,14 @@ refused without ``--optimizer momentum``. The metadata (all optional but the def
     parse            the argparse type of the flag (default: the field's type)
     metavar, group   how --help shows it
     shown_default    what --help says the default is, where the field's is a placeholder (a random seed)
-    applies          the policy kinds it applies to (default: every kind)
     scripts          "train", "evaluate": whose flag it is (default: training only)
     resumable        True: --resume may change it (it changes no result: threads, more generations)
     evaluation       True: the evaluate scripts take it from the run's config.json (what shapes the policy)
     requires         (setting, value): it has an effect only when that setting has that value; value ANY:
                      when that setting is on (true, or not None); several pairs: when all hold
     derived          True: filled in by the program (the resolved environment ids), never given
+    owner            (choice, plug-in): the plug-in whose setting it is, e.g. ("strategy", "pgpe"); set by
+                     ``plugins.joined`` from the plug-in that declares it, never by hand
 """
 
 from __future__ import annotations
@@ -81,12 +82,12 @@ class Spec:
     metavar: str | None = None
     group: str | None = None
     shown_default: str | None = None
-    applies: tuple[str, ...] | None = None
     scripts: tuple[str, ...] = ("train",)
     resumable: bool = False
     evaluation: bool = False
     requires: tuple | None = None
     derived: bool = False
+    owner: tuple[str, str] | None = None
 
 
 def setting(default, **metadata) -> Any:
@@ -116,9 +117,6 @@ class Option:
     def choices(self) -> tuple | None:
         choices = self.spec.choices
         return None if choices is None else tuple(choices() if callable(choices) else choices)
-
-    def applies_to(self, kind: str | None) -> bool:
-        return kind is None or self.spec.applies is None or kind in self.spec.applies
 
     @property
     def many(self) -> bool:
@@ -234,8 +232,10 @@ def _in_range(spec: Spec, value) -> bool:
 
 def check(settings) -> None:
     """Refuse, in a ValueError naming the flag, the first field of ``settings`` whose value is not valid
-    (whether it came from a flag, an experiment file or a config.json). Lists become tuples."""
-    for item in options(settings):
+    (whether it came from a flag, an experiment file or a config.json), or that sets a plug-in not chosen
+    (``stray``). Lists become tuples."""
+    declared = options(settings)
+    for item in declared:
         value = getattr(settings, item.name)
         if isinstance(value, list) and typing.get_origin(item.base_type()) is tuple:
             object.__setattr__(settings, item.name, tuple(value))  # frozen: before anyone has seen it
@@ -243,38 +243,101 @@ def check(settings) -> None:
         problem = value_problem(item, value)
         if problem is not None:
             raise ValueError(problem)
+    values = {item.name: getattr(settings, item.name) for item in declared}
+    for item in declared:
+        if stray(item, values[item.name], values, declared):
+            raise ValueError(f"{item.label} has an effect only with {owner_words(item, declared)}; leave it out")
+
+
+# --- plug-ins' settings -----------------------------------------------------------------------------------
+
+
+def _choice(item: Option, declared) -> Option:
+    """The setting that chooses the plug-in ``item`` belongs to."""
+    return next(entry for entry in declared if entry.name == item.spec.owner[0])
+
+
+def _names(value, plugin: str) -> bool:
+    """Whether a choice's value names ``plugin`` (one of them, for a choice of several: --logger)."""
+    return plugin in value if isinstance(value, (tuple, list)) else value == plugin
+
+
+def left_out_by(item: Option, values: dict, declared) -> Option | None:
+    """The choice that leaves ``item`` out in ``values``: the setting that chooses its plug-in, where it names
+    another, or the one that chooses the plug-in that choice belongs to, and so on up (a network's setting: the
+    network chosen, then the policy kind, which must be the static one that takes networks). None where every
+    one names its plug-in, or for a setting of no plug-in; a choice that ``values`` lack counts as made (a
+    script's flags: only its kind is known)."""
+    while item.spec.owner is not None:
+        choice, plugin = item.spec.owner
+        option = _choice(item, declared)
+        if choice in values and not _names(values[choice], plugin):
+            return option
+        item = option
+    return None
+
+
+def chosen(item: Option, values: dict, declared) -> bool:
+    """Whether ``item`` is a setting of no plug-in, or of plug-ins that ``values`` choose (``left_out_by``)."""
+    return left_out_by(item, values, declared) is None
+
+
+def stray(item: Option, value, values: dict, declared) -> bool:
+    """A value of a plug-in not chosen that no run could have: not its default, and not one that a resume may
+    change or the program fills in (a tracker's run id, kept by a resume that logs elsewhere)."""
+    return (item.spec.owner is not None and not chosen(item, values, declared) and value != item.default
+            and not (item.spec.resumable or item.spec.derived))
+
+
+def owner_words(item: Option, declared) -> str:
+    """Its plug-in in words: '--strategy pgpe'; for a choice the script makes (the policy kind), 'hebbian runs'."""
+    choice, plugin = item.spec.owner
+    label = _choice(item, declared).flag
+    return f"--{label} {plugin}" if label else f"{plugin} runs"
 
 
 # --- rules between settings ---------------------------------------------------------------------------
 
 
-def requirement(item: Option, declared) -> tuple[str, Callable[[dict], bool]] | None:
-    """What ``item`` needs, in words ("--optimizer adam"), and whether merged values have it."""
-    if item.spec.requires is None:
-        return None
-    pairs = item.spec.requires if isinstance(item.spec.requires[0], tuple) else (item.spec.requires,)
-    words, tests = [], []
-    for name, wanted in pairs:
+def requirements(item: Option, declared) -> list[tuple[str, Callable[[dict], bool]]]:
+    """What ``item`` needs, one condition at a time: in words ("--optimizer adam"), and whether merged values
+    meet it. Its plug-in comes first, where a flag chooses it ("--strategy pgpe"; the policy kind is the
+    script's), then what it ``requires``."""
+    pairs = [] if item.spec.requires is None else (
+        list(item.spec.requires) if isinstance(item.spec.requires[0], tuple) else [item.spec.requires])
+    if item.spec.owner is not None and _choice(item, declared).flag:
+        pairs.insert(0, item.spec.owner)
+    found = []
+    for name, wanted in dict.fromkeys(pairs):
         other = next(entry for entry in declared if entry.name == name)
         if wanted is ANY or wanted is True:
-            words.append(other.label)
-            tests.append(lambda values, name=name: values.get(name) not in (None, False))
+            found.append((other.label, lambda values, name=name: values.get(name) not in (None, False)))
         elif other.many:  # one of the values given: --wandb_project with --logger wandb (among others)
-            words.append(f"{other.label} {wanted}")
-            tests.append(lambda values, name=name, wanted=wanted: wanted in (values.get(name) or ()))
+            found.append((f"{other.label} {wanted}",
+                          lambda values, name=name, wanted=wanted: wanted in (values.get(name) or ())))
         else:
-            words.append(f"{other.label} {wanted}")
-            tests.append(lambda values, name=name, wanted=wanted: values.get(name) == wanted)
-    return " ".join(words), lambda values: all(test(values) for test in tests)
+            found.append((f"{other.label} {wanted}",
+                          lambda values, name=name, wanted=wanted: values.get(name) == wanted))
+    return found
+
+
+def requirement(item: Option, declared) -> tuple[str, Callable[[dict], bool]] | None:
+    """What ``item`` needs, in words ("--strategy openai --optimizer adam"), and whether merged values have it."""
+    found = requirements(item, declared)
+    if not found:
+        return None
+    return " ".join(words for words, _ in found), lambda values: all(test(values) for _, test in found)
 
 
 def unmet_requirement(declared, values: dict, given) -> str | None:
-    """The first given setting that would do nothing with these values, as one line."""
-    for item in declared:
-        found = requirement(item, declared) if item.name in given else None
-        if found is not None and not found[1](values):
-            needed = found[0]
-            return f"{item.label} has an effect only with {needed}; add {needed} or leave {item.label} out"
+    """The first given setting that would do nothing with these values, as one line: what it needs, and what of
+    that it lacks."""
+    for item in (item for item in declared if item.name in given):
+        found = requirements(item, declared)
+        unmet = [words for words, test in found if not test(values)]
+        if unmet:
+            needed = " ".join(words for words, _ in found)
+            return f"{item.label} has an effect only with {needed}; add {' '.join(unmet)} or leave {item.label} out"
     return None
 
 

@@ -4,12 +4,14 @@ what a user hands in (config.json, an experiment file) with every key checked ag
 (``settings``).
 
 ``config.json`` is its serialisation (one object per section), and an experiment file is the same
-sections in TOML (``experiments/*.toml``). A setting that does not apply to the run's policy kind is
-not recorded (no ``hebb_rule`` for a static run), and refused when given. config.json files of earlier
-versions are read too: one flat object, or sections that recorded every setting whatever the kind
-(those hold the defaults, and are dropped), without the sections added since (``LATER_SECTIONS``), with
-the keys of settings since retired (``RETIRED``). Resume and evaluation start from the recorded settings and
-apply the flags given (``overlay``): a flag that contradicts the recording is refused, naming both values.
+sections in TOML (``experiments/*.toml``). The settings of a plug-in the run does not choose are not
+recorded (``settings.chosen``: no ``hebb_rule`` for a static run, no PGPE setting for an OpenAI-ES run, no
+W&B setting without ``--logger wandb``); those of another policy kind are refused when given. config.json
+files of earlier versions are read too: one flat object, or sections that recorded every setting whatever
+the plug-ins (those of the plug-ins not chosen hold their defaults, or a tracker's, and are left out), without
+the sections added since (``LATER_SECTIONS``), with the keys of settings since retired (``RETIRED``). Resume
+and evaluation start from the recorded settings and apply the flags given (``overlay``): a flag that
+contradicts the recording is refused, naming both values.
 """
 
 from __future__ import annotations
@@ -23,7 +25,17 @@ from envs import EnvSettings
 from es.settings import ESSettings, RunSettings
 from policies import KINDS, PolicySettings
 from report.loggers import LogSettings
-from settings import Option, contradictions, file_value, options, type_problem
+from settings import (
+    Option,
+    chosen,
+    contradictions,
+    file_value,
+    left_out_by,
+    options,
+    owner_words,
+    stray,
+    type_problem,
+)
 
 SECTIONS = {"es": ESSettings, "policy": PolicySettings, "env": EnvSettings, "run": RunSettings, "log": LogSettings}
 LATER_SECTIONS = ("log",)  # absent from the config.json of earlier versions (their loggers: RETIRED's run.tensorboard)
@@ -56,11 +68,12 @@ class TrainConfig:
     log: LogSettings = LogSettings()
 
     def to_dict(self) -> dict:
-        """The sections, without the settings that do not apply to this policy kind."""
-        kind = self.policy.kind
-        return {name: {key: value for key, value in asdict(getattr(self, name)).items()
-                       if next(item for item in options(settings) if item.name == key).applies_to(kind)}
-                for name, settings in SECTIONS.items()}
+        """The sections, without the settings of the plug-ins this run does not choose."""
+        sections = {name: asdict(getattr(self, name)) for name in SECTIONS}
+        values = {key: value for section in sections.values() for key, value in section.items()}
+        every = declared()
+        return {name: {item.name: section[item.name] for item in options(SECTIONS[name])
+                       if chosen(item, values, every)} for name, section in sections.items()}
 
     @classmethod
     def from_dict(cls, data: dict, source: str = "config.json") -> TrainConfig:
@@ -141,11 +154,12 @@ RETIRED: dict[tuple[str, str], Callable[[object], dict]] = {
 
 def section_values(sections: dict, source: str, kind: str | None = None, recorded: bool = False) -> dict:
     """The flat settings of sectioned data (a config.json when ``recorded``, else an experiment file), every key
-    checked: unknown keys and keys that do not apply to the policy kind are refused with their names; a
-    config.json of an earlier version, which recorded every setting, may hold those at their defaults, and the
+    checked: unknown keys and keys of another policy kind are refused with their names. A config.json records
+    the settings of the plug-ins it chooses (``chosen``); one of an earlier version, which recorded every
+    setting, may hold those of the others at their defaults (or a tracker's run id), which are left out, and the
     keys of ``RETIRED``."""
     kind = kind or sections.get("policy", {}).get("kind", PolicySettings.kind)
-    flat, unknown, foreign = {}, [], []
+    flat, unknown, items = {}, [], {}
     for name, settings in SECTIONS.items():
         entries = sections.get(name, {})
         if not isinstance(entries, dict):
@@ -157,16 +171,33 @@ def section_values(sections: dict, source: str, kind: str | None = None, recorde
                 flat.update(RETIRED[name, key](value))
             elif item is None or (item.spec.derived and not recorded):
                 unknown.append(f"{name}.{key}")
-            elif not item.applies_to(kind):
-                if not recorded or value != item.default:
-                    foreign.append(f"{name}.{key} ({item.label}, for {' and '.join(item.spec.applies)} runs)")
             else:
-                flat[key] = value if recorded else file_value(item, value)
+                flat[key], items[key] = (value if recorded else file_value(item, value)), (name, item)
     if unknown:
         raise ValueError(f"{source}: unknown settings {', '.join(unknown)}")
+    every = declared()
+    # the choices made: a config.json's, all of them (its own or their defaults); an experiment file's, the
+    # script's kind (its other choices may come from flags: ``settings.unmet_requirement`` judges them)
+    choices = ({item.name: flat.get(item.name, item.default) for item in every} if recorded else {"kind": kind})
+    foreign = []
+    for key, (name, item) in items.items():
+        if chosen(item, choices, every):
+            continue
+        if not recorded or stray(item, flat[key], choices, every):
+            foreign.append(f"{name}.{key} ({item.label}, for {owner_words(item, every)}) does not apply to "
+                           f"{this_run(item, choices, every)}")
+        del flat[key]
     if foreign:
-        raise ValueError(f"{source}: {', '.join(foreign)} does not apply to a {kind} run")
+        raise ValueError(f"{source}: {', '.join(foreign)}")
     return flat
+
+
+def this_run(item: Option, choices: dict, every: list[Option]) -> str:
+    """The run, by the choice that leaves ``item`` out: 'a static run', 'this run (--strategy openai)'."""
+    choice = left_out_by(item, choices, every)
+    value = choices[choice.name]
+    shown = " ".join(value) if isinstance(value, (tuple, list)) else value
+    return f"this run ({choice.label} {shown or 'none'})" if choice.flag else f"a {shown} run"
 
 
 def read_toml(path: str | Path) -> dict:

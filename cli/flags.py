@@ -15,7 +15,7 @@ import numpy as np
 
 from cli.config import SECTIONS, declared
 from es.settings import original_threads as threads_value  # the ER-MRL and experiment scripts' too
-from settings import EPISODE_SEED_RANGE, SEED_RANGE, Option, expected, options, requirement
+from settings import EPISODE_SEED_RANGE, SEED_RANGE, Option, chosen, expected, options, requirement
 
 
 def converter(item: Option):
@@ -52,9 +52,11 @@ HELP_ORDER = ("env", "es", "run", "policy", "log")  # --help as the original's: 
 
 
 def script_options(script: str, kind: str) -> list[Option]:
-    """The settings whose flags ``script`` ("train" or "evaluate") has for a policy ``kind``."""
+    """The settings whose flags ``script`` ("train" or "evaluate") has for a policy ``kind``: not those of
+    another kind's plug-ins."""
     ordered = [item for section in HELP_ORDER for item in options(SECTIONS[section])]
-    return [item for item in ordered if item.flag and script in item.spec.scripts and item.applies_to(kind)]
+    return [item for item in ordered if item.flag and script in item.spec.scripts
+            and chosen(item, {"kind": kind}, ordered)]
 
 
 def add_settings(parser: argparse.ArgumentParser, script: str, kind: str, defaults: dict | None = None,

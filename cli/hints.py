@@ -15,7 +15,7 @@ from pathlib import Path
 
 from cli.config import TRAIN_SCRIPTS, TrainConfig
 from policies import KINDS
-from policies.registry import FileFlag
+from policies.plugin import FileFlag
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -22,6 +22,7 @@ from cli.config import SECTIONS, TRAIN_SCRIPTS, Contradiction, TrainConfig, decl
 from cli.errors import USER_ERRORS, Parser, UserError, explained, say
 from cli.flags import add_settings, defaults, given, non_empty
 from cli.hints import evaluate_hint, resume_hint
+from cli.reporting import RunReport
 from envs import ProblemSpec
 from envs.modules import resume_imports
 from es.backends import NonFiniteEpisode
@@ -29,8 +30,6 @@ from es.interrupts import honour_sigint
 from es.loop import NonFiniteUpdate, Status, Trainer
 from es.runfolder import Checkpoint, RunFolder, RunFolderError, SaveError, release_locks, settings_record
 from es.settings import ESSettings
-from report.log import FitnessPlot, GenerationLog
-from report.loggers import Loggers, missing
 from report.machine import machine
 from report.progress import display_for
 from settings import contradictions, type_problem, unmet_requirement
@@ -76,9 +75,9 @@ def check_population_fits(es: ESSettings, n_envs: int) -> None:
 
 def config_from_args(kind: str, args: argparse.Namespace) -> TrainConfig:
     """The flags given, over those of the experiment file ``--config`` names, if any, over the defaults."""
-    flags = given(args)
+    flags, default = given(args), defaults(kind, {"folder": args.default_folder})
     from_file = experiment_values(args.config, kind) if args.config is not None else {}
-    values = {**defaults(kind, {"folder": args.default_folder}), **from_file, **flags}
+    values = {**default, **from_file, **flags}
     unmet = unmet_requirement(declared(), values, {*from_file, *flags})
     if unmet is not None:
         raise UserError(unmet)
@@ -119,17 +118,21 @@ def experiment_values(path: str, kind: str) -> dict:
     return values
 
 
-def config_for_resume(kind: str, args: argparse.Namespace) -> tuple[TrainConfig, RunFolder]:
-    """The run's recorded settings, with the flags given, checked (``checked_resume``); the folder is then
-    locked for this process."""
-    resumed, folder = checked_resume(kind, args)
+def configured(kind: str, args: argparse.Namespace) -> tuple[TrainConfig, RunFolder | None, dict]:
+    """A new run's settings (its folder: None, made once its environments are), or a resumed run's, with its
+    folder, locked for this process, and its config.json as it was."""
+    if args.resume is None:
+        config = config_from_args(kind, args)
+        check_writable(config.run.folder)
+        return config, None, {}
+    resumed, folder, recorded = checked_resume(kind, args)
     folder.lock()  # held until this process exits
-    return resumed, folder
+    return resumed, folder, recorded
 
 
-def checked_resume(kind: str, args: argparse.Namespace) -> tuple[TrainConfig, RunFolder]:
+def checked_resume(kind: str, args: argparse.Namespace) -> tuple[TrainConfig, RunFolder, dict]:
     """The run's recorded settings, with the flags given: only the resumable ones may differ; the
-    checkpoint is checked against config.json before anything is written."""
+    checkpoint is checked against config.json before anything is written. Its config.json too."""
     folder = RunFolder.existing(args.resume)
     recorded = folder.read_config()
     try:
@@ -165,7 +168,7 @@ def checked_resume(kind: str, args: argparse.Namespace) -> tuple[TrainConfig, Ru
                         "or start a new run")
     if imports:
         say(imports)
-    return resumed, folder
+    return resumed, folder, recorded
 
 
 # what config.json records of the run's history beside its settings: (its JSON type, of entries of that type, in
@@ -212,12 +215,6 @@ def edited_settings(checkpoint: Checkpoint, config: TrainConfig) -> list[str]:
     return contradictions({name: recorded.get(name, defaults.get(name)) for name in current}, current, declared())
 
 
-def check_loggers(config: TrainConfig) -> None:
-    """Refuse, before anything starts, a --logger whose packages are not installed."""
-    if (problem := missing(config.log)) is not None:
-        raise UserError(problem)
-
-
 def check_writable(folder: str) -> None:
     """Refuse, before anything is built or created, a --folder that could not hold a run folder."""
     path = Path(folder)
@@ -239,13 +236,16 @@ def versions() -> dict:
     return found
 
 
-def write_config(trainer: Trainer, config: TrainConfig, problem, command: list[str]) -> None:
+def write_config(trainer: Trainer, config: TrainConfig, problem, command: list[str], report: RunReport,
+                 earlier: dict) -> None:
     """config.json: the settings (with the noise size the run uses), then what they led to; a
-    resume keeps the first command and lists its own under "resumed", and each start and resume adds the
-    machine it runs on from its generation on under "machines" (what metrics.csv's seconds were measured on),
-    with the package versions it has installed; "versions" beside them is the latest start's or resume's."""
+    resume keeps the first command of ``earlier`` (its config.json as it was) and lists its own under "resumed",
+    and each start and resume adds the machine it runs on from its generation on under "machines" (what
+    metrics.csv's seconds were measured on), with the package versions it has installed; "versions" beside them
+    is the latest start's or resume's. The loggers are told the settings once, and their trackers' run ids
+    recorded. A new run then saves its first checkpoint: it is resumable from the start, even if the first
+    generation fails."""
     folder = trainer.folder
-    earlier = folder.read_config() if (folder.path / "config.json").exists() else {}
     line = " ".join(command)
     settings = replace(config, es=trainer.es)
     data = settings.to_dict()
@@ -256,21 +256,25 @@ def write_config(trainer: Trainer, config: TrainConfig, problem, command: list[s
                 workers=trainer.evaluator.workers, wrappers=problem.wrappers(),
                 machines=earlier.get("machines", []) + [here])
     with explained("cannot start the loggers"):
-        data["log"].update(trainer.begin(data))  # the loggers' settings once; their trackers' run ids, recorded
+        data["log"].update(report.begin(folder, data, trainer.state.generation, trainer.policy.metrics_columns))
     folder.write_config(data)
     folder.settings = settings_record(settings.fixed())  # what its checkpoints record from now on
+    if not earlier:
+        trainer.save_checkpoint()
 
 
-def start(config: TrainConfig, folder: RunFolder | None) -> tuple[Trainer, object]:
+def start(config: TrainConfig, folder: RunFolder | None) -> tuple[Trainer, object, RunReport]:
     """The trainer of a new run (``folder`` None: created once the environments are made) or of a
-    resumed one."""
+    resumed one (restored from its checkpoint), its problem, and what reports on the run, which the trainer hands
+    each generation's record: made first, it refuses a --logger whose packages are not installed."""
+    report = RunReport(config.log, log)
     spec = ProblemSpec(config.env.env_ids, config.policy, config.env.recipe_modules, config.env.max_episode_steps)
     with explained("cannot make the environments"):
         problem = spec.build()
     if config.policy.obs_norm and not problem.policy.normalised_inputs:
         log("note: --obs_norm does nothing for pixel observations (the CNN sees pixels in [0, 1]); "
             "this run normalises nothing")
-    created = folder is None
+    created, trainer = folder is None, None
     try:
         if created:
             try:
@@ -278,47 +282,43 @@ def start(config: TrainConfig, folder: RunFolder | None) -> tuple[Trainer, objec
             except OSError as error:
                 raise UserError(f"--folder {config.run.folder}: {error.strerror or error}") from None
         with explained("cannot start the run"):
-            reporters = [GenerationLog(log), FitnessPlot(),
-                         Loggers(config.log, folder.path, problem.policy.metrics_columns, log)]
             trainer = Trainer.start(config.es, config.run, problem, spec.build, config.env.env_ids, folder,
-                                    config.env.label, log=log, display=display_for(sys.stdout), reporters=reporters)
+                                    config.env.label, log=log, display=display_for(sys.stdout), on_generation=report)
+        if not created:
+            with explained("cannot resume"):
+                trainer.restore(folder.load_checkpoint())
     except BaseException:
+        if trainer is not None:  # a checkpoint it cannot resume from: its workers stop
+            trainer.close()
         problem.close()
         if created and folder is not None:
             folder.remove_if_unused()  # an empty folder but for its lock
         raise
-    return trainer, problem
+    return trainer, problem, report
 
 
 def train_main(kind: str, parser: Parser, argv: list[str] | None = None) -> int:
     honour_sigint()  # a background job's SIGINT too
     argv = sys.argv[1:] if argv is None else argv
     args = parser.parse_args(argv)
-    trainer = None
+    trainer = report = None
     try:
-        if args.resume is not None:
-            config, folder = config_for_resume(kind, args)
-        else:
-            config, folder = config_from_args(kind, args), None
-            check_writable(config.run.folder)
-        check_loggers(config)
-        trainer, problem = start(config, folder)
-        if folder is None:
-            write_config(trainer, config, problem, [parser.prog, *argv])
-            trainer.save_checkpoint()  # resumable from the start, even if the first generation fails
-        else:
-            with explained("cannot resume"):
-                trainer.restore(folder.load_checkpoint())
-            done = trainer.state.generation
-            if done >= config.run.generations:
-                log(f"{folder.path} has already run {done} generations; nothing to do "
-                    f"(--generations is the total: pass more than {done} to continue)")
-                return 0
+        config, folder, recorded = configured(kind, args)
+        trainer, problem, report = start(config, folder)
+        done = trainer.state.generation
+        if recorded and done >= config.run.generations:
+            log(f"{folder.path} has already run {done} generations; nothing to do "
+                f"(--generations is the total: pass more than {done} to continue)")
+            return 0
+        if recorded:
             log(f"resuming {folder.path} at generation {done} of {config.run.generations}")
-            write_config(trainer, config, problem, [parser.prog, *argv])  # the new settings and the command
+        write_config(trainer, config, problem, [parser.prog, *argv], report, recorded)
         log(f"run folder: {trainer.folder.path} | environment: {', '.join(config.env.env_ids)} | parameters: "
             f"{trainer.policy.num_params} | workers: {trainer.evaluator.workers} | seed: {config.run.seed}")
-        return report_end(trainer, config, trainer.train(), parser.prog)
+        status = trainer.train()
+        if status is Status.DONE:
+            report.finished()
+        return report_end(trainer, config, status, parser.prog)
     except (*USER_ERRORS, SaveError) as error:  # SaveError here: before training started
         kept = f"; {after_failed_save(config, trainer.folder)}" if isinstance(error, SaveError) and trainer else ""
         print(f"{parser.prog}: error: {error}{kept}", file=sys.stderr)
@@ -329,6 +329,8 @@ def train_main(kind: str, parser: Parser, argv: list[str] | None = None) -> int:
         print(f"{parser.prog}: stopped at once; saved files are intact{resume}", file=sys.stderr)
         return 130
     finally:
+        if report is not None:
+            report.close()
         if trainer is not None:
             trainer.close()
             if args.resume is None:  # a new run whose loggers failed to start: no folder left behind

@@ -18,8 +18,11 @@ Hebbian weights are normalised after every update for every family except pyBull
 
 Images are preprocessed for the network that will see them: ``default`` (the original's 84 x 84 RGB,
 or Atari's stack of 4 grayscale frames) or ``pytorch-es`` (its 1 x 42 x 42 running-normalised frame,
-``envs.pytorch_es``), as the policy's network asks (``policies.registry.NETWORKS``).
+``envs.pytorch_es``), as the policy's network asks (``policies.networks.NETWORKS``).
 
+A recipe is a plug-in (``plugins``) of the registry ``RECIPES``, chosen by what it matches rather than by a
+setting: the last one registered whose ``matches`` takes the environment is its recipe, so the built-in ones
+are listed from the most general to the most specific, and a custom one, registered later, wins over them.
 Custom families are added with ``register_recipe`` from an importable module. The module is
 recorded (``custom_recipe_modules``, saved in config.json), and every process that builds the
 environments (worker processes, Ray actors, a resumed run) imports it first, so the recipe reaches
@@ -47,11 +50,11 @@ from envs.wrappers import (
     PixelObservation,
     ProgressReward,
 )
+from plugins import Plugin, Registry
 
 
 @dataclass(frozen=True)
-class Recipe:
-    name: str
+class Recipe(Plugin):
     matches: Callable[[gym.Env], bool]  # called once, on the unwrapped environment
     squash_output: bool = False  # tanh is the network's output activation (the rule sees it)
     action: Callable[[gym.Env], gym.Env] | None = None  # None: clip a Box, argmax a Discrete
@@ -127,12 +130,13 @@ PYBULLET = Recipe("pyBullet", _is_pybullet, **_PYBULLET)
 ATARI = Recipe("Atari", is_atari, preprocess=atari_pipeline)
 GYMNASIUM = Recipe("Gymnasium", lambda env: True)
 
-_RECIPES: list[Recipe] = [CAR_RACING, PYBULLET_ANT, PYBULLET, ATARI, GYMNASIUM]
+RECIPES: Registry[Recipe] = Registry(None, [GYMNASIUM, ATARI, PYBULLET, PYBULLET_ANT, CAR_RACING])
 _CUSTOM_MODULES: list[str] = []  # the modules that registered recipes, in order
 
 
 def register_recipe(recipe: Recipe) -> None:
-    """Give a family of (custom) environments its own behaviour; newest registrations win.
+    """Give a family of (custom) environments its own behaviour; newest registrations win (a recipe of the
+    same name is replaced).
 
     Call it at the top level of an importable module (the one that defines ``recipe.matches``):
     that module is what worker processes import to get the recipe too.
@@ -141,7 +145,7 @@ def register_recipe(recipe: Recipe) -> None:
     if module == "__main__":
         raise ValueError(f"recipe {recipe.name!r} is defined in the script being run; define it in an importable "
                          "module so that worker processes can import it too")
-    _RECIPES.insert(0, recipe)
+    RECIPES.add(recipe, replace=True)
     if module not in _CUSTOM_MODULES:
         _CUSTOM_MODULES.append(module)
 
@@ -162,5 +166,6 @@ def import_recipe_modules(modules: tuple[str, ...]) -> None:
 
 
 def recipe_for(env: gym.Env) -> Recipe:
+    """The last registered recipe that matches ``env`` (``GYMNASIUM``, first, matches every one)."""
     unwrapped = env.unwrapped
-    return next(recipe for recipe in _RECIPES if recipe.matches(unwrapped))
+    return next(recipe for recipe in reversed(RECIPES.values()) if recipe.matches(unwrapped))

@@ -15,12 +15,15 @@ generations, as extra tasks of the same parallel generation, on seeds drawn from
 [2^31, 2^32), a range training seeds (< 2^31 - 1) never come from; their mean then picks best. The
 loop knows arrays, workers and files; the policy only through its protocol
 (``num_params``, ``initial_params``, ``penalised``, ``export``, ``file_name``), the environments
-not at all; what the user sees goes through the injected ``log``, display and reporters.
+not at all. What the user sees goes through the injected ``log`` and display, and the caller is handed each
+generation's record (``GenerationRecord``: its metrics row, and whether the run's files were saved after it)
+through one callback, ``on_generation``: the training script prints it, draws it and sends it to the loggers,
+which it makes and closes itself (``cli.train``).
 
 The strategy is injected (``Trainer(..., strategy=...)``; by default the one ``--strategy`` names in
 ``es.strategies.STRATEGIES``) and known only through its ask/tell (``es.strategy.Strategy``): its
-``Population`` says what the workers rebuild and whether members come in mirrored pairs, which then
-share their episode seeds (common random numbers); otherwise each member has seeds of its own.
+``Population`` says what the workers rebuild, and members that are mirrored pairs share their episode
+seeds (common random numbers); otherwise each member has seeds of its own.
 """
 
 from __future__ import annotations
@@ -29,9 +32,8 @@ import contextlib
 import enum
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
-from typing import Protocol
 
 import numpy as np
 
@@ -84,35 +86,23 @@ class CenterReport:
     center_eval_std: float = math.nan
 
 
-class Reporter(Protocol):
-    """What the loop tells whoever reports on a run (the generation log, the figure, the loggers); each
-    subclasses this and overrides what it does (the defaults do nothing)."""
+@dataclass(frozen=True)
+class GenerationRecord:
+    """What the loop hands its caller after each generation."""
 
-    def begin(self, record: dict, generation: int) -> dict:
-        """As the run starts (generation 0) or resumes after ``generation``, with the settings config.json
-        records; what config.json should record beside them (a tracker's run id)."""
-        return {}
-
-    def generation(self, row: dict) -> None:
-        """After every generation, with its metrics row."""
-
-    def saved(self, folder: RunFolder, rows: list[dict]) -> None:
-        """After every save of the run's files, with every metrics row so far."""
-
-    def finished(self, folder: RunFolder) -> None:
-        """When the run has run all its generations, after its last save."""
-
-    def close(self) -> None:
-        """When the run ends."""
+    row: dict  # its metrics row, as metrics.csv now ends
+    rows: list[dict]  # every metrics row so far, this one last (the loop's own list: read it, never change it)
+    saved: bool  # the run's files were saved after it (every --print_every generations, the last, at a stop)
 
 
 class Trainer:
     def __init__(self, es: ESSettings, run: RunSettings, policy, noise: NoiseTable, evaluator: Evaluator,
                  n_envs: int, folder: RunFolder, label: str, log: Callable[[str], None] = print,
-                 display=None, reporters: Sequence[Reporter] = (), strategy: Strategy | None = None):
+                 display=None, on_generation: Callable[[GenerationRecord], None] | None = None,
+                 strategy: Strategy | None = None):
         self.es, self.run, self.policy, self.noise, self.evaluator = es, run, policy, noise, evaluator
         self.n_envs, self.folder, self.label, self.log = n_envs, folder, label, log
-        self.display, self.reporters = display, reporters
+        self.display, self.on_generation = display, on_generation
         self.strategy = strategy if strategy is not None else make_strategy(es, policy.num_params)
         self.state = self.strategy.initial_state(policy.initial_params(np.random.default_rng([run.seed, 1])))
         self.history = History()
@@ -140,37 +130,37 @@ class Trainer:
         return cls(es, run, problem.policy, noise, evaluator, len(env_ids), folder, label, **options)
 
     def train(self) -> Status:
-        """Generations up to ``run.generations``; saves every ``print_every``, at the end and when interrupted."""
+        """Generations up to ``run.generations``; saves every ``print_every``, at the end and when interrupted;
+        each generation's record handed to ``on_generation``."""
         with Interrupts() as interrupts:
             try:
                 while self.state.generation < self.run.generations:
                     row = self._step()
                     with interrupts.held():  # the metrics row and the save it may take agree, even at a stop
-                        self._publish(row)
+                        self.folder.write_metrics(self.history.metrics, self.policy.metrics_columns)
                         done = self.state.generation
-                        if done % self.run.print_every == 0 or done == self.run.generations or interrupts.requested:
+                        saved = done % self.run.print_every == 0 or done == self.run.generations or interrupts.requested
+                        if saved:
+                            self.save()
+                        self._hand_on(row, saved)
+                        if interrupts.requested and not saved:  # asked for while the record was handed on
                             self.save()
                     if interrupts.requested:
                         return Status.INTERRUPTED
             except (EvaluationError, WorkerStartError, SaveError, NonFiniteUpdate) as error:
                 return self._stop(error)
-        for reporter in self.reporters:
-            reporter.finished(self.folder)
         return Status.DONE
 
-    def begin(self, record: dict) -> dict:
-        """Tell the reporters the run's settings (what config.json records) as it starts or resumes; what they
-        ask config.json to record beside them."""
-        recorded = {}
-        for reporter in self.reporters:
-            recorded.update(reporter.begin(record, self.state.generation))
-        return recorded
-
     def generation(self) -> dict:
-        """One generation, top to bottom, its metrics row written; the row."""
+        """One generation, top to bottom, its metrics row written and handed on (no save); the row."""
         row = self._step()
-        self._publish(row)
+        self.folder.write_metrics(self.history.metrics, self.policy.metrics_columns)
+        self._hand_on(row, False)
         return row
+
+    def _hand_on(self, row: dict, saved: bool) -> None:
+        if self.on_generation is not None:
+            self.on_generation(GenerationRecord(row, self.history.metrics, saved))
 
     def _step(self) -> dict:
         """One generation's episodes and update; its metrics row, kept in the history but not yet written."""
@@ -279,19 +269,11 @@ class Trainer:
             history.fitness_log.append(row["fitness_mean"])
         return row
 
-    def _publish(self, row: dict) -> None:
-        """Rewrite metrics.csv with every row so far and tell the reporters of ``row``."""
-        self.folder.write_metrics(self.history.metrics, self.policy.metrics_columns)
-        for reporter in self.reporters:
-            reporter.generation(row)
-
     def save(self) -> None:
-        """The run's files, what the reporters save, and last the checkpoint: a save cut short
-        leaves the previous checkpoint to resume from."""
+        """The run's files, and last the checkpoint: a save cut short leaves the previous checkpoint to resume
+        from."""
         self.folder.save_generation(self.policy, self.state, self.history, self.label, self.es.popsize,
                                     self.observations)
-        for reporter in self.reporters:
-            reporter.saved(self.folder, self.history.metrics)
         self.save_checkpoint()
 
     def save_checkpoint(self) -> None:
@@ -329,7 +311,5 @@ class Trainer:
         return Status.FAILED
 
     def close(self) -> None:
-        for reporter in self.reporters:
-            reporter.close()
         self.evaluator.close()
         self.noise.close()

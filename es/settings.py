@@ -5,11 +5,11 @@
 Each field is the one declaration of its option (``settings.setting``): its default, range or choices,
 flag, help, and whether a resume may change it. ``ESSettings`` is the search's settings (``SearchSettings``:
 the population, the fitness, the episodes, the centre's evaluation, the strategy) joined with each
-strategy's own, which its module declares (``es.strategies``: OpenAI-ES's learning rate, schedules,
-shaping and optimiser; PGPE's, SNES's and ARS's), so that a run's ES settings stay one flat section of
-config.json and of an experiment file. Every constant the original hard-coded is a field, with the
-original's value as its default (docs/original.md, "The evolution strategy"); the options beyond the original
-default to the original's behaviour.
+strategy's own, which its plug-in declares (``es.strategies``: OpenAI-ES's learning rate, schedules,
+shaping and optimiser; PGPE's, SNES's and ARS's; ``plugins.joined``), so that a run's ES settings stay one
+flat section of config.json and of an experiment file, which holds the chosen strategy's. Every constant the
+original hard-coded is a field, with the original's value as its default (docs/original.md, "The evolution
+strategy"); the options beyond the original default to the original's behaviour.
 """
 
 from __future__ import annotations
@@ -18,16 +18,23 @@ import os
 from dataclasses import dataclass
 
 from es.strategies import STRATEGIES
-from es.strategy import STRATEGY_GROUP, StrategySettings
+from es.strategy import STRATEGY_GROUP
+from plugins import joined
 from settings import ANY, FLOAT32_MAX, MODERN, SEED_RANGE, check, setting
 
 BACKENDS = ("process", "ray")  # es.backends: a process pool on this machine, or Ray
 
 
 @dataclass(frozen=True)
-class SearchSettings(StrategySettings):
-    """What the loop reads beside the strategy's own settings, and which strategy it runs."""
+class SearchSettings:
+    """What defines the search: two runs with equal ESSettings (and seed) step alike. The loop's settings and
+    which strategy it runs, then (``ESSettings``) each strategy's own, in the registry's order."""
 
+    popsize: int = setting(200, low=2, metavar="N",
+                           help="population size (even for the strategies that sample mirrored pairs: "
+                                f"{', '.join(name for name, plugin in STRATEGIES.items() if plugin.pairs)})")
+    sigma: float = setting(0.1, low=0, low_open=True, high=FLOAT32_MAX,
+                           help="initial noise standard deviation (the members theta + sigma * noise are float32)")
     fitness_l2: float = setting(0.01, low=0, high=FLOAT32_MAX, metavar="C", group=MODERN,
                                 help="the original's L2 penalty in the fitness: return - C * mean(theta_m^2) "
                                      "(recorded in float32)")
@@ -46,33 +53,19 @@ class SearchSettings(StrategySettings):
                                     help="pytorch-es's adaptive episode length: each generation's episodes end after "
                                          "twice the mean length of the last generation's perturbed episodes")
     strategy: str = setting("openai", choices=STRATEGIES, group=STRATEGY_GROUP,
-                            help="openai (Salimans et al. 2017, the original), pgpe (Sehnke et al. 2010, with ClipUp), "
-                                 "snes (separable NES), cma_es and sep_cma_es (the cmaes library: pip install -r "
-                                 "requirements-strategies.txt), ars (Mania et al. 2018; V2 with --obs_norm "
-                                 "--obs_norm_prob 1); docs/strategies.md")
-
-
-def _own_settings() -> tuple[type, ...]:
-    """Each strategy's settings class, once, in the registry's order reversed (so that the fields come in the
-    registry's order), without the classes that another one extends (the shared base among them)."""
-    classes = list(dict.fromkeys(entry.settings for entry in STRATEGIES.values()))
-    return tuple(reversed([cls for cls in classes if not any(other is not cls and issubclass(other, cls)
-                                                             for other in classes)]))
-
-
-@dataclass(frozen=True)
-class ESSettings(*_own_settings(), SearchSettings):
-    """What defines the search: two runs with equal ESSettings (and seed) step alike. Its fields: the
-    search's (``SearchSettings``), then each strategy's own, in the registry's order."""
+                            help=f"{STRATEGIES.described()}; docs/strategies.md")
 
     def __post_init__(self) -> None:
         check(self)
-        STRATEGIES[self.strategy].check(self.strategy, self)  # the population rule, the strategy's own checks
+        STRATEGIES[self.strategy].check(self)  # the population rule, the strategy's own checks
 
     def evaluates_centre(self, generation: int) -> bool:
         """Whether the centre runs its evaluation episodes in generation ``generation`` (0-based):
         generations G, 2G, ... counted from 1."""
         return self.eval_every is not None and (generation + 1) % self.eval_every == 0
+
+
+ESSettings = joined(SearchSettings, STRATEGIES, name="ESSettings", module=__name__)
 
 
 def _threads(value: int) -> bool:

@@ -1,4 +1,4 @@
-"""The ask/tell interface every strategy shares, and what a strategy declares to the registry.
+"""The ask/tell interface every strategy shares, and what a strategy declares as a plug-in.
 
 The interface (``Strategy``, in the style of evosax): ``initial_state(theta)``; ``ask(state, rng,
 noise)`` returns the generation's ``Population`` -- a noise index and a sign per member (the wire
@@ -8,15 +8,14 @@ published once per generation as theta is; ``tell(state, noise, population, fitn
 new ``ESState`` and a dict of metrics (``update_factor``, ``skipped``). A strategy's own arrays live
 in ``ESState.strategy`` and the optimiser's in ``ESState.optimizer``, both saved in the checkpoint.
 
-A strategy's module (``es.strategies``) declares, as evosax's algorithms own their parameters:
-
-- its settings: a frozen dataclass subclassing ``StrategySettings`` (the population size and initial
-  sigma every strategy reads), each field made with ``settings.setting()`` and requiring its strategy
-  (``requires=("strategy", NAME)``), so that its flags, TOML keys, config.json keys, checks and docs
-  come from that one declaration (``es.settings.ESSettings`` joins every strategy's);
-- its entry (``StrategyEntry``): the factory from those settings and the number of parameters, the
-  settings class, and the population rule -- whether members come in mirrored pairs, which needs an
-  even ``--popsize`` (refused in one line otherwise, never rounded).
+A strategy's module (``es.strategies``) declares, as evosax's algorithms own their parameters, its plug-in
+(``StrategyPlugin``, ``plugins``): its name; its settings, a frozen dataclass of its own fields made with
+``settings.setting()`` (each then has an effect only with ``--strategy`` naming it, and config.json records it
+only then: ``es.settings.ESSettings`` joins them to the search's, which every strategy reads: ``popsize``,
+``sigma``); the factory from the run's settings and the number of parameters; and its population rule,
+``pairs``, with no default: whether its members are mirrored pairs, which needs an even ``--popsize``
+(refused in one line otherwise, never rounded). Whether a generation's members share their episode seeds is
+what its population is (``Population.mirrored``), never a flag a strategy could forget to set.
 
 The registry of strategies is ``es.strategies.STRATEGIES``, one line per strategy.
 """
@@ -31,24 +30,9 @@ import numpy as np
 
 from es.noise import NoiseTable
 from es.optimizers import OptimizerState
-from settings import FLOAT32_MAX, setting
+from plugins import Plugin
 
 STRATEGY_GROUP = "strategies beyond the original's OpenAI-ES (--strategy openai)"  # their flags' --help group
-
-
-@dataclass(frozen=True)
-class StrategySettings:
-    """What every strategy reads: the population and the initial scale of the search."""
-
-    popsize: int = setting(200, low=2, metavar="N",
-                           help="population size (even for the strategies that sample mirrored pairs: openai, pgpe, "
-                                "ars)")
-    sigma: float = setting(0.1, low=0, low_open=True, high=FLOAT32_MAX,
-                           help="initial noise standard deviation (the members theta + sigma * noise are float32)")
-
-    def validate(self) -> None:
-        """What a strategy's settings refuse beyond each one's own range (a ValueError naming the flag);
-        called for the run's strategy only. Nothing here."""
 
 
 @dataclass(frozen=True)
@@ -69,9 +53,16 @@ class Population:
 
     indices: np.ndarray  # int64: noise index (or row of ``rows``) of each member
     signs: np.ndarray  # int8: +1 or -1
-    mirrored: bool = True  # members 2p and 2p+1 are a mirrored pair: they share their episode seeds
     scale: np.ndarray | None = None  # float32 (dim,): per-parameter sigma, published with theta
     rows: np.ndarray | None = None  # float32 (members, dim): the members themselves, published with theta
+
+    @property
+    def mirrored(self) -> bool:
+        """Members 2p and 2p+1 are a mirrored pair, theta +- the same slice: they share their episode seeds
+        (common random numbers). What the members are says it; no strategy declares it."""
+        signs, indices = self.signs, self.indices
+        return (self.rows is None and signs.size % 2 == 0 and bool((signs[0::2] == 1).all())
+                and bool((signs[1::2] == -1).all()) and bool((indices[0::2] == indices[1::2]).all()))
 
 
 class Strategy(Protocol):
@@ -88,21 +79,22 @@ class Strategy(Protocol):
         """The next state from each member's fitness (member order, higher is better), and metrics."""
 
 
-@dataclass(frozen=True)
-class StrategyEntry:
-    """A strategy as the registry holds it."""
+@dataclass(frozen=True, kw_only=True)
+class StrategyPlugin(Plugin):
+    """A strategy as its module declares it (``plugins.Plugin``: its name, what it is, its settings)."""
 
-    make: Callable[[Any, int], Strategy]  # (the run's settings, an instance of ``settings``; parameters) -> it
-    settings: type[StrategySettings] = StrategySettings  # the dataclass declaring its own settings
-    pairs: bool = False  # its members are mirrored pairs: --popsize must be even
+    make: Callable[[Any, int], Strategy]  # (the run's ``es.settings.ESSettings``, the number of parameters) -> it
+    pairs: bool  # its members are mirrored pairs: --popsize must be even
+    validate: Callable[[Any], None] | None = None  # what its settings refuse beyond each one's range (a ValueError)
 
-    def check(self, name: str, settings: StrategySettings) -> None:
+    def check(self, settings) -> None:
         """The population rule, then the strategy's own (``validate``): a ValueError in one line."""
         size = settings.popsize
         if self.pairs and size % 2:
-            raise ValueError(f"--popsize {size} is odd, but --strategy {name} samples mirrored pairs; give an even "
-                             f"--popsize such as {size - 1} or {size + 1}")
-        self.settings.validate(settings)
+            raise ValueError(f"--popsize {size} is odd, but --strategy {self.name} samples mirrored pairs; give an "
+                             f"even --popsize such as {size - 1} or {size + 1}")
+        if self.validate is not None:
+            self.validate(settings)
 
 
 def mirrored_population(rng: np.random.Generator, noise: NoiseTable, dim: int, pairs: int) -> Population:

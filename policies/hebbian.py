@@ -27,8 +27,10 @@ from policies.conv import ConvFeatures
 from policies.init import COEVOLVE, INIT_CHOICES, sample_weights
 from policies.kernels import hebbian_forward_update
 from policies.network import Layout, NetworkSpec, from_kernel_layout, to_kernel_layout
-from policies.rules import get_rule
+from policies.plugin import EVALUATED, FileFlag, Kind
+from policies.rules import RULES, get_rule
 from policies.static import check_length, head_buffers
+from settings import setting
 
 DISTRIBUTIONS = ("normal", "uniform")
 ROLES = {"initial_weights": "coevolved_initial_weights", "cnn": "CNN_parameters"}  # layout part -> file role
@@ -158,3 +160,27 @@ class HebbianPolicy(Policy):
         """The original Hebbian code's name (docs/original.md, "Files")."""
         return (f"HEBcoeffs__{env}__rew_{reward}__{self.rule.name}__init_{self.init_weights}__pop_{population}"
                 f"__{role}__{generation}.dat")
+
+# --- the kind (policies.registry.KINDS) ----------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class HebbianSettings:
+    """The Hebbian kind's own settings: flags of train_hebb.py and evaluate_hebb.py, recorded for its runs only."""
+
+    hebb_rule: str = setting("ABCD_lr", choices=RULES, metavar="RULE", scripts=EVALUATED, evaluation=True,
+                             help="Hebbian rule (the one the coefficients were evolved for)")
+    init_weights: str = setting("uni", choices=INIT_CHOICES, metavar="INIT", scripts=EVALUATED, evaluation=True,
+                                help="initial weights of every episode (coevolve: evolved with the rules)")
+    distribution: str = setting("normal", choices=DISTRIBUTIONS,
+                                help="generation-0 coefficients (and CNN / co-evolved weights): normal N(0,1) or "
+                                     "uniform U(-1,1)")
+
+
+KIND = Kind("hebbian", about="evolved plasticity rules (Najarro & Risi 2020)", settings=HebbianSettings,
+            build=lambda settings, net, normalise: HebbianPolicy(net, settings.hebb_rule, settings.init_weights,
+                                                                 normalise, settings.distribution),
+            plastic=True, scripts=("train_hebb.py", "evaluate_hebb.py"),
+            files=(FileFlag("--path_hebb", ("coeffs",), "Hebbian coefficients"),
+                   FileFlag("--path_coev", ("CNN_parameters", "coevolved_initial_weights"),
+                            "CNN weights (pixel environments) or of co-evolved initial weights")))

@@ -37,6 +37,7 @@ from numba import njit
 from policies.elementary import exp32, rational_tanh, sigmoid32
 from policies.init import default_init
 from policies.network import Layout, NetworkSpec
+from policies.plugin import Network
 from policies.static import WeightFile
 
 SELU_ALPHA = np.float32(1.6732632423543772848170429916717)
@@ -259,3 +260,8 @@ class ConvLSTMPolicy(WeightFile):
         lstm_step(state.lstm_weights, state.lstm_bias, state.inputs, state.cell, state.gates, *state.actor, state.out,
                   self.net.squash_out)
         return state.out, state
+
+
+SMALL = Network("small", about="pytorch-es's 64-64 selu MLP (state vectors)", build=SmallNetPolicy)
+LSTM = Network("lstm", about="pytorch-es's conv-LSTM on its 42x42 normalised frames (images)", build=ConvLSTMPolicy,
+               preprocessing="pytorch-es")

@@ -1,74 +1,47 @@
-"""Policy kinds by name, and the settings that choose one.
+"""Policy kinds by name (``KINDS``), and the settings that choose one.
 
-A new kind of network is one module that implements ``policies.base.Policy`` plus one entry in
-``KINDS`` (``Kind``): a function from (settings, network spec, whether the environment normalises plastic
-weights) to the policy, whether its weights are plastic, the scripts that train and evaluate it, and the
-evaluate script's flags of its files. Nothing else in the project branches on the kind: the scripts, the
-printed commands and config.json take what they need of a kind from its entry.
+A new kind of network is one module that implements ``policies.base.Policy`` and declares its plug-in
+(``policies.plugin.Kind``: its settings, a function from (settings, network spec, whether the environment
+normalises plastic weights) to the policy, whether its weights are plastic, the scripts that train and evaluate
+it, and the evaluate script's flags of its files), plus one line in ``KINDS``. Nothing else in the project
+branches on the kind: the scripts, the printed commands and config.json take what they need of a kind from its
+plug-in, and a kind's settings are flags of its scripts only (``policies.networks``: only the static kind takes
+``--network``).
 
 A front end changes what any kind reads: ``--reservoir`` puts an echo state network between the
 observation and the network (``policies.reservoir``); ``--obs_norm`` normalises what comes first.
-
-Static networks come in three shapes (``--network``, ``NETWORKS``): the original's MLP / CNN
-(``default``), and pytorch-es's small net and conv-LSTM (``policies.pytorch_es``). A network also
-names the image preprocessing it expects (``envs.recipes.PREPROCESSING``), which the environments
-are made with.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 
+from plugins import Registry, joined
+from policies import hebbian, networks
 from policies.base import Policy
-from policies.hebbian import DISTRIBUTIONS, HebbianPolicy
-from policies.init import INIT_CHOICES
 from policies.network import NetworkSpec
+from policies.networks import NETWORKS
 from policies.normalised import NormalisedInputs
-from policies.pytorch_es import ConvLSTMPolicy, SmallNetPolicy
+from policies.plugin import EVALUATED, Kind, Network
 from policies.reservoir import BOUNDS, MAX_UNITS, Hyperparameters, ReservoirFrontEnd, check_evolve_start, head_network
-from policies.rules import RULES
-from policies.static import StaticPolicy
 from settings import MODERN, SEED_RANGE, check, setting
 
-
-@dataclass(frozen=True)
-class Network:
-    build: Callable[[NetworkSpec], Policy]
-    preprocessing: str = "default"  # the images it is fed: envs.recipes.PREPROCESSING
-
-
-NETWORKS: dict[str, Network] = {
-    "default": Network(StaticPolicy),
-    "small": Network(SmallNetPolicy),
-    "lstm": Network(ConvLSTMPolicy, preprocessing="pytorch-es"),
-}
-
+KINDS: Registry[Kind] = Registry("kind", [
+    networks.KIND,
+    hebbian.KIND,
+])
 
 RESERVOIR = "reservoir front end (ER-MRL's echo state network before the network)"
-EVALUATED = ("train", "evaluate")  # flags of the evaluate scripts too, which take them from a run's config.json
 
 
 @dataclass(frozen=True)
-class PolicySettings:
-    """The policy of a run; each field is its option's one declaration (``settings.setting``)."""
+class CommonPolicySettings:
+    """The policy of a run: its kind, and the front ends every kind takes; then (``PolicySettings``) each kind's
+    and each network's own settings. Each field is its option's one declaration (``settings.setting``)."""
 
-    kind: str = setting("static", flag=None, choices=lambda: KINDS, evaluation=True,
-                        help="the policy kind: the script's (train_static.py, train_hebb.py)")
-    hebb_rule: str = setting("ABCD_lr", choices=RULES, metavar="RULE", applies=("hebbian",), scripts=EVALUATED,
-                             evaluation=True,
-                             help="Hebbian rule (the one the coefficients were evolved for)")
-    init_weights: str = setting("uni", choices=INIT_CHOICES, metavar="INIT", applies=("hebbian",), scripts=EVALUATED,
-                                evaluation=True,
-                                help="initial weights of every episode (coevolve: evolved with the rules)")
-    distribution: str = setting("normal", choices=DISTRIBUTIONS, applies=("hebbian",),
-                                help="generation-0 coefficients (and CNN / co-evolved weights): normal N(0,1) or "
-                                     "uniform U(-1,1)")
-    network: str = setting("default", choices=lambda: NETWORKS, applies=("static",), scripts=EVALUATED,
-                           evaluation=True,
-                           help="default: the original's MLP (state vectors) or CNN (images); small: pytorch-es's "
-                                "64-64 selu MLP (state vectors); lstm: pytorch-es's conv-LSTM on its 42x42 normalised "
-                                "frames (images)")
+    kind: str = setting("static", flag=None, choices=KINDS, evaluation=True,
+                        help="the policy kind: the script's (" + ", ".join(kind.scripts[0] for kind in KINDS.values())
+                             + ")")
     obs_norm: bool = setting(False, evaluation=True, group=MODERN,
                              help="normalise observations by running statistics (OpenAI's RunningStat); not for pixels")
     obs_clip: float | None = setting(None, low=0, low_open=True, requires=("obs_norm", True), metavar="C",
@@ -111,51 +84,19 @@ class PolicySettings:
     def reservoir_hyperparameters(self) -> Hyperparameters:
         return Hyperparameters(self.reservoir_lr, self.reservoir_sr, self.reservoir_iss)
 
-    def seeded(self, run_seed: int) -> PolicySettings:
+    def seeded(self, run_seed: int) -> CommonPolicySettings:
         """These settings with the reservoir's seed filled in: the run's, unless one was given."""
         if not self.reservoir or self.reservoir_seed is not None:
             return self
         return replace(self, reservoir_seed=run_seed)
 
 
-@dataclass(frozen=True)
-class FileFlag:
-    """The evaluate script's flag for one of the files a kind's policies save (``Policy.roles``)."""
-
-    flag: str  # "--path_hebb"
-    roles: tuple[str, ...]  # the roles it can give; a policy has one of them (CNN weights or co-evolved ones)
-    holds: str  # what the file holds, for --help
-
-
-@dataclass(frozen=True)
-class Kind:
-    """A kind of policy: how to build one, and what the scripts need to know of it."""
-
-    build: Callable[[PolicySettings, NetworkSpec, bool], Policy]
-    plastic: bool  # its weights change within an episode, so the environments' normalisation matters
-    scripts: tuple[str, str]  # its training script and its evaluate script
-    files: tuple[FileFlag, ...]  # the evaluate script's flags of its files; the first its main file (roles[0])
-
-
-KINDS: dict[str, Kind] = {
-    "static": Kind(lambda settings, net, normalise: network_of(settings).build(net), plastic=False,
-                   scripts=("train_static.py", "evaluate_static.py"),
-                   files=(FileFlag("--path_weights", ("weights",), "evolved weights"),)),
-    "hebbian": Kind(lambda settings, net, normalise: HebbianPolicy(net, settings.hebb_rule, settings.init_weights,
-                                                                   normalise, settings.distribution), plastic=True,
-                    scripts=("train_hebb.py", "evaluate_hebb.py"),
-                    files=(FileFlag("--path_hebb", ("coeffs",), "Hebbian coefficients"),
-                           FileFlag("--path_coev", ("CNN_parameters", "coevolved_initial_weights"),
-                                    "CNN weights (pixel environments) or of co-evolved initial weights"))),
-}
+PolicySettings = joined(CommonPolicySettings, KINDS, NETWORKS, name="PolicySettings", module=__name__)
 
 
 def kind_of(settings: PolicySettings) -> Kind:
     if settings.kind not in KINDS:
         raise ValueError(f"unknown policy kind {settings.kind!r}; valid kinds: {', '.join(KINDS)}")
-    if settings.kind != "static" and settings.network != "default":
-        raise ValueError(f"network {settings.network!r} is a static network (pytorch-es's); {settings.kind} "
-                         "networks have the default shape only")
     return KINDS[settings.kind]
 
 

@@ -16,6 +16,7 @@ from policies.conv import ConvFeatures
 from policies.init import default_init
 from policies.kernels import static_forward
 from policies.network import Layout, NetworkSpec, to_kernel_layout
+from policies.plugin import Network
 
 
 @dataclass
@@ -90,3 +91,6 @@ class StaticPolicy(WeightFile):
             obs = state.features(obs)
         static_forward(state.head, obs, state.work, *self._sizes, self.net.squash_out)
         return state.out, state
+
+
+NETWORK = Network("default", about="the original's MLP (state vectors) or CNN (images)", build=StaticPolicy)

@@ -1,7 +1,7 @@
 """What a training run shows and draws as it goes: its one line per generation, and ``fitness.png``.
 
-Both are reporters of the generation loop (``es.loop.Reporter``): they receive each generation's
-metrics row and each save, and the loop itself never prints.
+The training script makes them and hands them what the generation loop hands it (``es.loop.GenerationRecord``):
+each generation's metrics row, and each save; the loop itself never prints.
 """
 
 from __future__ import annotations
@@ -9,7 +9,6 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
-from es.loop import Reporter
 from es.runfolder import SaveError
 from report.plots import save_run_plot
 
@@ -42,7 +41,7 @@ def generation_line(row: dict) -> str:
     return line
 
 
-class GenerationLog(Reporter):
+class GenerationLog:
     """Prints one line per generation."""
 
     def __init__(self, log: Callable[[str], None] = print):
@@ -52,7 +51,7 @@ class GenerationLog(Reporter):
         self.log(generation_line(row))
 
 
-class FitnessPlot(Reporter):
+class FitnessPlot:
     """Draws the run's ``fitness.png``: at a save once ``redraw_seconds`` have passed since it last drew (or since
     the run began), and when the run ends, with every row saved. A drawing costs a good part of a second, the first
     one more (matplotlib's import): drawn at every save, a run of short generations spent a sizeable share of its
@@ -69,7 +68,7 @@ class FitnessPlot(Reporter):
             self.draw()
 
     def finished(self, folder) -> None:
-        self.draw()  # before the loggers, after it in the list of reporters, send the run's figures
+        self.draw()  # before the loggers send the run's figures
 
     def close(self) -> None:
         try:

@@ -19,10 +19,9 @@ import train_static
 from es import files
 from es.backends import Results
 from es.interrupts import Interrupts
-from es.loop import Reporter
 from es.runfolder import read_checkpoint
 from es.shaping import rank_std
-from report.log import GenerationLog
+from report.log import generation_line
 from tests.run_helpers import Training, descendants, hint, only_run, small_trainer, still_running
 
 FAILING_ENV = "tests.failing_env:FailingEnv-v0"
@@ -138,7 +137,7 @@ class _RecordingStrategy:
 def test_nan_and_infinite_returns_are_ranked_last_and_reported(tmp_path):
     lines = []
     run = small_trainer(tmp_path, popsize=6, log=lines.append)
-    run.reporters = [GenerationLog(lines.append)]
+    run.on_generation = lambda record: lines.append(generation_line(record.row))
     try:
         run.evaluator.close()
         run.evaluator = _ScriptedReturns([10.0, np.nan, 30.0, np.inf, 20.0, -np.inf])
@@ -243,13 +242,14 @@ def test_a_full_disk_stops_the_run_naming_the_file_and_keeps_earlier_files(tmp_p
 # --- a second interrupt while a generation's files are written ------------------------------------------
 
 
-class _InterruptTwice(Reporter):
-    """Sends this process two SIGINTs as the loop tells it of generation ``at``, as an impatient user would."""
+class _InterruptTwice:
+    """Sends this process two SIGINTs as the loop hands it generation ``at``'s record, as an impatient user would."""
 
     def __init__(self, at: int):
         self.at, self.after_signals = at, []
 
-    def generation(self, row: dict) -> None:
+    def __call__(self, record) -> None:
+        row = record.row
         if row["generation"] == self.at:
             os.kill(os.getpid(), signal.SIGINT)
             os.kill(os.getpid(), signal.SIGINT)
@@ -259,7 +259,7 @@ class _InterruptTwice(Reporter):
 def test_a_second_interrupt_waits_for_the_generations_files_then_stops_at_once(tmp_path):
     run = small_trainer(tmp_path, popsize=4, generations=5)
     reporter = _InterruptTwice(at=2)
-    run.reporters = [reporter]
+    run.on_generation = reporter
     try:
         with pytest.raises(KeyboardInterrupt):
             run.train()

@@ -456,7 +456,8 @@ def test_tensorboard_holds_every_metrics_column(tmp_path):
     (("--eval_every", "2", "--eval_episodes", "0"), "--eval_episodes must be a whole number >= 1, got 0"),
     (("--eval_every", "0"), "--eval_every must be a whole number >= 1, got 0"),
     (("--max_episode_steps", "0"), "--max_episode_steps must be a whole number >= 1, got 0"),
-    (("--beta1", "0.5"), "--beta1 has an effect only with --optimizer adam; add --optimizer adam or leave --beta1 out"),
+    (("--beta1", "0.5"), "--beta1 has an effect only with --strategy openai --optimizer adam; add --optimizer adam or "
+                         "leave --beta1 out"),
     (("--obs_clip", "5"), "--obs_clip has an effect only with --obs_norm; add --obs_norm or leave --obs_clip out"),
     (("--eval_episodes", "5"), "--eval_episodes has an effect only with --eval_every; add --eval_every or leave "
                                "--eval_episodes out"),

@@ -367,8 +367,9 @@ def test_a_custom_recipe_reaches_worker_processes_and_resumed_runs(tmp_path, mon
     import train_static
     from envs import recipes
     from es.files import load_dat, read_metrics
+    from plugins import Registry
 
-    monkeypatch.setattr(recipes, "_RECIPES", list(recipes._RECIPES))
+    monkeypatch.setattr(recipes, "RECIPES", Registry(None, recipes.RECIPES.values()))
     monkeypatch.setattr(recipes, "_CUSTOM_MODULES", [])
     monkeypatch.delitem(sys.modules, "tests.custom_recipe", raising=False)
     import tests.custom_recipe  # noqa: F401  (registers the recipe, in this process only)

@@ -29,7 +29,8 @@ import pytest
 
 import train_hebb
 import train_static
-from envs import ProblemSpec
+from cli.config import TrainConfig
+from envs import EnvSettings, ProblemSpec
 from envs.problem import Problem
 from es.files import load_dat, read_metrics
 from es.loop import Trainer
@@ -40,11 +41,11 @@ from es.strategies import STRATEGIES, make_strategy
 from es.strategies.cma import check_covariance_fits
 from es.strategies.pgpe import PGPE, clipup_velocity
 from es.strategies.snes import default_sigma_lr
-from es.strategy import StrategySettings
 from es.worker import perturb
+from policies import PolicySettings
 from policies.network import Layout
 from policies.static import WeightFile
-from settings import options
+from settings import options, requirement
 from tests.extras import need
 from tests.run_helpers import assert_same_checkpoint_and_metrics, only_run
 
@@ -111,16 +112,21 @@ def test_a_population_is_what_the_wire_protocol_can_carry(name):
 
 @pytest.mark.parametrize("name", list(STRATEGIES))
 def test_a_strategy_owns_its_settings_and_its_population_rule(name):
-    """Its settings class declares only settings that require it (so that they are flags of its runs only), and
-    its population rule is what its populations do: mirrored pairs need an even --popsize, refused when odd."""
+    """Its plug-in's settings are fields of ESSettings owned by it: each has an effect only with --strategy naming
+    it, and a run of another strategy neither records it nor takes another value of it. Its population rule is what
+    its populations do: mirrored pairs need an even --popsize, refused when odd."""
     needs_extra(name)
     entry = STRATEGIES[name]
-    shared = {item.name for item in options(StrategySettings)}
-    own = [item for item in options(entry.settings) if item.name not in shared]
-    for item in own:  # each requires the strategy, or another of its own settings (Adam's betas: --optimizer adam)
-        pairs = item.spec.requires if isinstance(item.spec.requires[0], tuple) else (item.spec.requires,)
-        assert ("strategy", name) in pairs or pairs[0][0] in {other.name for other in own}, item.name
-    assert issubclass(ESSettings, entry.settings)
+    own = [item.name for item in options(entry.settings)] if entry.settings is not None else []
+    owned = {item.name: item for item in options(ESSettings) if item.spec.owner == ("strategy", name)}
+    assert list(owned) == own
+    other = next(strategy for strategy in ("openai", "snes") if strategy != name)
+    for item in owned.values():
+        assert requirement(item, options(ESSettings))[0].startswith(f"--strategy {name}")
+        assert item.name not in TrainConfig(settings_for(other), PolicySettings(), EnvSettings(), RunSettings()
+                                            ).to_dict()["es"]
+    assert set(owned) <= set(TrainConfig(settings_for(name), PolicySettings(), EnvSettings(), RunSettings()
+                                         ).to_dict()["es"])
     population = make_strategy(settings_for(name), 12).ask(
         make_strategy(settings_for(name), 12).initial_state(np.zeros(12, np.float32)), np.random.default_rng(0),
         NoiseTable.create(seed=1, size=4096))

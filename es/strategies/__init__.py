@@ -1,5 +1,5 @@
-"""The registry of strategies: ``--strategy`` name -> ``StrategyEntry`` (``es.strategy``: the factory
-``(settings, number of parameters) -> Strategy``, the strategy's settings, its population rule). The loop
+"""The registry of strategies (``plugins.Registry``): ``--strategy`` name -> ``es.strategy.StrategyPlugin`` (its
+settings, its factory ``(settings, number of parameters) -> Strategy``, its population rule). The loop
 (``es.loop.Trainer``) knows a strategy only through the ask/tell interface.
 
     openai      OpenAI-ES, the original's (Salimans et al. 2017)
@@ -9,24 +9,24 @@
     sep_cma_es  separable CMA-ES (Ros & Hansen 2008), through the ``cmaes`` library (optional extra)
     ars         augmented random search, V1-t and V2-t (Mania et al. 2018)
 
-Adding a strategy: its module (the strategy, its settings class, its ``StrategyEntry``) and one line
-here; ``es.settings.ESSettings`` takes its settings from the entry, and ``tests/test_strategies.py``
-runs every entry.
+Adding a strategy: its module, which declares its plug-in, and one line here; ``es.settings.ESSettings``
+takes its settings from the plug-in, and ``tests/test_strategies.py`` runs every plug-in.
 """
 
 from __future__ import annotations
 
 from es.strategies import ars, cma, openai, pgpe, snes
-from es.strategy import Strategy, StrategyEntry
+from es.strategy import Strategy, StrategyPlugin
+from plugins import Registry
 
-STRATEGIES: dict[str, StrategyEntry] = {
-    "openai": openai.STRATEGY,
-    "pgpe": pgpe.STRATEGY,
-    "snes": snes.STRATEGY,
-    "cma_es": cma.FULL,
-    "sep_cma_es": cma.SEPARABLE,
-    "ars": ars.STRATEGY,
-}
+STRATEGIES: Registry[StrategyPlugin] = Registry("strategy", [
+    openai.PLUGIN,
+    pgpe.PLUGIN,
+    snes.PLUGIN,
+    cma.FULL,
+    cma.SEPARABLE,
+    ars.PLUGIN,
+])
 
 
 def make_strategy(settings, dim: int) -> Strategy:

@@ -30,18 +30,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from es.noise import NoiseTable
-from es.strategy import (
-    STRATEGY_GROUP,
-    ESState,
-    Population,
-    StrategyEntry,
-    StrategySettings,
-    check_fitness,
-    mirrored_population,
-)
+from es.strategy import STRATEGY_GROUP, ESState, Population, StrategyPlugin, check_fitness, mirrored_population
 from settings import setting
-
-WITH_ARS = ("strategy", "ars")  # what each of its settings requires
 
 
 def finite_rewards(fitness: np.ndarray) -> np.ndarray | None:
@@ -54,23 +44,23 @@ def finite_rewards(fitness: np.ndarray) -> np.ndarray | None:
 
 
 @dataclass(frozen=True)
-class ARSSettings(StrategySettings):
-    ars_lr: float = setting(0.02, low=0, low_open=True, requires=WITH_ARS, group=STRATEGY_GROUP,
-                            help="ARS: the step size alpha")
-    ars_top: int | None = setting(None, low=1, requires=WITH_ARS, metavar="B", group=STRATEGY_GROUP,
-                                  shown_default="all --popsize / 2",
+class ARSSettings:
+    ars_lr: float = setting(0.02, low=0, low_open=True, group=STRATEGY_GROUP, help="ARS: the step size alpha")
+    ars_top: int | None = setting(None, low=1, metavar="B", group=STRATEGY_GROUP, shown_default="all --popsize / 2",
                                   help="ARS: the b best directions make the step (V1-t, V2-t)")
 
-    def validate(self) -> None:
-        directions = self.popsize // 2
-        if self.ars_top is not None and self.ars_top > directions:
-            raise ValueError(f"--ars_top must be a whole number from 1 to {directions} (the directions: --popsize / 2)"
-                             f", got {self.ars_top}")
+
+def check_top(settings) -> None:
+    """--ars_top is at most the number of directions."""
+    directions = settings.popsize // 2
+    if settings.ars_top is not None and settings.ars_top > directions:
+        raise ValueError(f"--ars_top must be a whole number from 1 to {directions} (the directions: --popsize / 2), "
+                         f"got {settings.ars_top}")
 
 
 @dataclass(frozen=True)
 class ARS:
-    population_size: int  # even (the registry's population rule): popsize / 2 directions
+    population_size: int  # even (the plug-in's population rule): popsize / 2 directions
     sigma: float  # nu
     lr: float  # alpha
     top: int | None = None  # b; None: every direction
@@ -108,8 +98,9 @@ class ARS:
         return new_state, {"update_factor": factor, "skipped": factor == 0.0}
 
 
-def make(settings: ARSSettings, dim: int) -> ARS:
+def make(settings, dim: int) -> ARS:
     return ARS(settings.popsize, settings.sigma, settings.ars_lr, settings.ars_top)
 
 
-STRATEGY = StrategyEntry(make, ARSSettings, pairs=True)
+PLUGIN = StrategyPlugin("ars", about="Mania et al. 2018; V2 with --obs_norm --obs_norm_prob 1", settings=ARSSettings,
+                        make=make, pairs=True, validate=check_top)

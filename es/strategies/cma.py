@@ -29,7 +29,7 @@ import os
 import numpy as np
 
 from es.noise import NoiseTable
-from es.strategy import ESState, Population, StrategyEntry, StrategySettings, check_fitness
+from es.strategy import ESState, Population, StrategyPlugin, check_fitness
 
 INSTALL_HINT = "pip install -r requirements-strategies.txt (or pip install -e .[strategies])"
 STATE = ("_mean", "_sigma", "_C", "_p_sigma", "_pc", "_g", "_funhist_values")  # what tell() changes
@@ -99,7 +99,7 @@ class LibraryCMA:
         with np.errstate(over="ignore"):  # members beyond float32's range: the workers refuse them, naming them
             members = np.array([optimizer.ask() for _ in range(self.population_size)], dtype=np.float32)
         return Population(np.arange(self.population_size, dtype=np.int64), np.ones(self.population_size, np.int8),
-                          mirrored=False, rows=members)
+                          rows=members)
 
     def tell(self, state: ESState, noise: NoiseTable, population: Population,
              fitness: np.ndarray) -> tuple[ESState, dict]:
@@ -130,16 +130,18 @@ def check_covariance_fits(popsize: int, dim: int, memory: int | None = None) -> 
                          "covariance, linear in the parameters)")
 
 
-def make_full(settings: StrategySettings, dim: int) -> LibraryCMA:
+def make_full(settings, dim: int) -> LibraryCMA:
     check_covariance_fits(settings.popsize, dim)
     return LibraryCMA("cma_es", settings.popsize, settings.sigma, separable=False)
 
 
-def make_separable(settings: StrategySettings, dim: int) -> LibraryCMA:
+def make_separable(settings, dim: int) -> LibraryCMA:
     if dim < 2:
         raise ValueError(f"--strategy sep_cma_es needs at least 2 parameters, this policy has {dim}")
     return LibraryCMA("sep_cma_es", settings.popsize, settings.sigma, separable=True)
 
 
-# the library samples its members (no pairs, no settings of their own)
-FULL, SEPARABLE = StrategyEntry(make_full), StrategyEntry(make_separable)
+LIBRARY = "the cmaes library: pip install -r requirements-strategies.txt"
+# the library samples its members (no pairs), with no settings of their own
+FULL = StrategyPlugin("cma_es", about=f"CMA-ES, {LIBRARY}", make=make_full, pairs=False)
+SEPARABLE = StrategyPlugin("sep_cma_es", about=f"separable CMA-ES, {LIBRARY}", make=make_separable, pairs=False)

@@ -31,26 +31,26 @@ import numpy as np
 from es.noise import NoiseTable
 from es.optimizers import OPTIMIZERS, Optimizer, make_optimizer
 from es.shaping import SHAPINGS, Shaping
-from es.strategy import ESState, Population, StrategyEntry, StrategySettings, check_fitness, mirrored_population
+from es.strategy import ESState, Population, StrategyPlugin, check_fitness, mirrored_population
 from settings import MODERN, setting
-
-WITH_OPENAI = ("strategy", "openai")  # what each of its settings requires
 
 
 @dataclass(frozen=True)
-class OpenAISettings(StrategySettings):
-    lr: float = setting(0.2, requires=WITH_OPENAI, low=0, low_open=True, help="ES learning rate")
-    decay: float = setting(0.995, requires=WITH_OPENAI, low=0, high=1, low_open=True,
+class OpenAISettings:
+    """Its own settings (``popsize`` and ``sigma`` are the search's: ``es.settings``)."""
+
+    lr: float = setting(0.2, low=0, low_open=True, help="ES learning rate")
+    decay: float = setting(0.995, low=0, high=1, low_open=True,
                            help="learning-rate decay per generation (while lr > lr_floor)")
-    lr_floor: float = setting(0.001, requires=WITH_OPENAI, flag=None, low=0, help="lr decays while above this")
-    sigma_decay: float = setting(0.999, requires=WITH_OPENAI, flag=None, low=0, high=1, low_open=True,
+    lr_floor: float = setting(0.001, flag=None, low=0, help="lr decays while above this")
+    sigma_decay: float = setting(0.999, flag=None, low=0, high=1, low_open=True,
                                  help="sigma *= sigma_decay per generation while sigma > sigma_floor")
-    sigma_floor: float = setting(0.01, requires=WITH_OPENAI, flag=None, low=0, help="sigma decays while above this")
-    shaping: str = setting("rank_std", requires=WITH_OPENAI, choices=SHAPINGS, group=MODERN,
+    sigma_floor: float = setting(0.01, flag=None, low=0, help="sigma decays while above this")
+    shaping: str = setting("rank_std", choices=SHAPINGS, group=MODERN,
                            help="fitness shaping: rank_std (the original: centered ranks, standardised), rank "
                                 "(OpenAI's centered ranks), none (the fitness, standardised), nes (pytorch-es's NES "
                                 "utilities)")
-    optimizer: str = setting("sgd", choices=OPTIMIZERS, aliases={"useAdam": "adam"}, requires=WITH_OPENAI, group=MODERN,
+    optimizer: str = setting("sgd", choices=OPTIMIZERS, aliases={"useAdam": "adam"}, group=MODERN,
                              help="sgd (the original), adam or momentum (OpenAI's; gradient sum F*eps / N); --lr is "
                                   "the step size")
     beta1: float = setting(0.9, low=0, high=1, high_open=True, requires=("optimizer", "adam"), group=MODERN,
@@ -59,21 +59,21 @@ class OpenAISettings(StrategySettings):
                            help="Adam's second-moment decay")
     momentum: float = setting(0.9, low=0, high=1, high_open=True, requires=("optimizer", "momentum"), group=MODERN,
                               help="the momentum of --optimizer momentum")
-    l2coeff: float = setting(0.0, requires=WITH_OPENAI, low=0, metavar="C", group=MODERN,
+    l2coeff: float = setting(0.0, low=0, metavar="C", group=MODERN,
                              help="weight decay in the gradient, g <- g - C * theta (OpenAI's l2coeff)")
 
 
-def decay_lr(lr: float, settings: OpenAISettings) -> float:
+def decay_lr(lr: float, settings) -> float:
     return lr * settings.decay if lr > settings.lr_floor else lr
 
 
-def decay_sigma(sigma: float, settings: OpenAISettings) -> float:
+def decay_sigma(sigma: float, settings) -> float:
     return sigma * settings.sigma_decay if sigma > settings.sigma_floor else sigma
 
 
 @dataclass(frozen=True)
 class OpenES:
-    settings: OpenAISettings  # its population size is even (the registry's population rule)
+    settings: object  # the run's es.settings.ESSettings: its population size is even (the plug-in's population rule)
     shaping: Shaping | None = None  # default: the one settings.shaping names
     optimizer: Optimizer | None = None  # default: the one settings.optimizer names
 
@@ -124,8 +124,9 @@ class OpenES:
         return total
 
 
-def make(settings: OpenAISettings, dim: int) -> OpenES:
+def make(settings, dim: int) -> OpenES:
     return OpenES(settings)
 
 
-STRATEGY = StrategyEntry(make, OpenAISettings, pairs=True)
+PLUGIN = StrategyPlugin("openai", about="Salimans et al. 2017, the original", settings=OpenAISettings, make=make,
+                        pairs=True)

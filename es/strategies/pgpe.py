@@ -48,15 +48,7 @@ from es import exact
 from es.noise import NoiseTable
 from es.optimizers import Adam, OptimizerState
 from es.shaping import rank
-from es.strategy import (
-    STRATEGY_GROUP,
-    ESState,
-    Population,
-    StrategyEntry,
-    StrategySettings,
-    check_fitness,
-    mirrored_population,
-)
+from es.strategy import STRATEGY_GROUP, ESState, Population, StrategyPlugin, check_fitness, mirrored_population
 from settings import optional_float, setting
 
 
@@ -91,34 +83,31 @@ def _sgd(pgpe: PGPE, theta: np.ndarray, gradient: np.ndarray, state: OptimizerSt
 PGPE_OPTIMIZERS: dict[str, CenterStep] = {"clipup": _clipup, "adam": _adam, "sgd": _sgd}
 
 
-WITH_PGPE = ("strategy", "pgpe")  # what each of its settings requires
-
-
 @dataclass(frozen=True)
-class PGPESettings(StrategySettings):
-    pgpe_optimizer: str = setting("clipup", choices=PGPE_OPTIMIZERS, requires=WITH_PGPE, group=STRATEGY_GROUP,
+class PGPESettings:
+    pgpe_optimizer: str = setting("clipup", choices=PGPE_OPTIMIZERS, group=STRATEGY_GROUP,
                                   help="how PGPE steps its centre (ClipUp, Toklu et al. 2020; Adam; plain gradient "
                                        "ascent)")
-    pgpe_lr: float | None = setting(None, low=0, low_open=True, requires=WITH_PGPE, group=STRATEGY_GROUP,
+    pgpe_lr: float | None = setting(None, low=0, low_open=True, group=STRATEGY_GROUP,
                                     shown_default="--clipup_max_speed / 2", help="PGPE's centre step size")
-    clipup_max_speed: float | None = setting(None, low=0, low_open=True, requires=WITH_PGPE, group=STRATEGY_GROUP,
+    clipup_max_speed: float | None = setting(None, low=0, low_open=True, group=STRATEGY_GROUP,
                                              shown_default="--sigma * sqrt(d) / 15, d the parameters",
                                              help="ClipUp's maximum speed (the velocity's largest norm); by default "
                                                   "the ClipUp paper's rule: initial radius sigma sqrt(d) = 15 x it")
     clipup_momentum: float = setting(0.9, low=0, high=1, high_open=True, group=STRATEGY_GROUP,
-                                     requires=(WITH_PGPE, ("pgpe_optimizer", "clipup")),
+                                     requires=("pgpe_optimizer", "clipup"),
                                      help="ClipUp's momentum (the velocity's decay)")
-    pgpe_sigma_lr: float = setting(0.1, low=0, low_open=True, requires=WITH_PGPE, group=STRATEGY_GROUP,
+    pgpe_sigma_lr: float = setting(0.1, low=0, low_open=True, group=STRATEGY_GROUP,
                                    help="PGPE: sigma += pgpe_sigma_lr * its gradient")
     pgpe_max_sigma_change: float | None = setting(0.2, low=0, high=1, low_open=True, parse=optional_float,
-                                                  requires=WITH_PGPE, metavar="C", group=STRATEGY_GROUP,
+                                                  metavar="C", group=STRATEGY_GROUP,
                                                   help="PGPE: each sigma changes by at most this fraction per "
                                                        "generation; none: no limit")
 
 
 @dataclass(frozen=True)
 class PGPE:
-    population_size: int  # even (the registry's population rule): N = population_size / 2 directions
+    population_size: int  # even (the plug-in's population rule): N = population_size / 2 directions
     sigma_init: float
     lr: float  # the centre's step size
     sigma_lr: float
@@ -174,7 +163,7 @@ def default_max_speed(sigma: float, dim: int) -> float:
     return sigma * math.sqrt(dim) / 15
 
 
-def make(settings: PGPESettings, dim: int) -> PGPE:
+def make(settings, dim: int) -> PGPE:
     max_speed = settings.clipup_max_speed
     max_speed = max_speed if max_speed is not None else default_max_speed(settings.sigma, dim)
     lr = settings.pgpe_lr if settings.pgpe_lr is not None else max_speed / 2
@@ -182,4 +171,4 @@ def make(settings: PGPESettings, dim: int) -> PGPE:
                 settings.pgpe_optimizer, max_speed, settings.clipup_momentum)
 
 
-STRATEGY = StrategyEntry(make, PGPESettings, pairs=True)
+PLUGIN = StrategyPlugin("pgpe", about="Sehnke et al. 2010, with ClipUp", settings=PGPESettings, make=make, pairs=True)

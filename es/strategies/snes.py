@@ -27,17 +27,15 @@ import numpy as np
 
 from es import exact
 from es.noise import NoiseTable
-from es.strategy import STRATEGY_GROUP, ESState, Population, StrategyEntry, StrategySettings, check_fitness
+from es.strategy import STRATEGY_GROUP, ESState, Population, StrategyPlugin, check_fitness
 from settings import setting
-
-WITH_SNES = ("strategy", "snes")  # what each of its settings requires
 
 
 @dataclass(frozen=True)
-class SNESSettings(StrategySettings):
-    snes_lr: float = setting(1.0, low=0, low_open=True, requires=WITH_SNES, group=STRATEGY_GROUP,
+class SNESSettings:
+    snes_lr: float = setting(1.0, low=0, low_open=True, group=STRATEGY_GROUP,
                              help="SNES: the centre's learning rate (the paper's 1)")
-    snes_sigma_lr: float | None = setting(None, low=0, low_open=True, requires=WITH_SNES, group=STRATEGY_GROUP,
+    snes_sigma_lr: float | None = setting(None, low=0, low_open=True, group=STRATEGY_GROUP,
                                           shown_default="(3 + ln d) / (5 sqrt d), d the parameters",
                                           help="SNES: sigma's learning rate")
 
@@ -80,7 +78,7 @@ class SNES:
         indices = noise.sample_indices(rng, state.theta.size, self.population_size)
         with np.errstate(over="ignore"):  # a sigma beyond float32's range: the workers refuse the parameters
             scale = state.strategy["sigma"].astype(np.float32)
-        return Population(indices, np.ones(self.population_size, dtype=np.int8), mirrored=False, scale=scale)
+        return Population(indices, np.ones(self.population_size, dtype=np.int8), scale=scale)
 
     def tell(self, state: ESState, noise: NoiseTable, population: Population,
              fitness: np.ndarray) -> tuple[ESState, dict]:
@@ -101,9 +99,10 @@ class SNES:
         return new_state, {"update_factor": self.lr, "skipped": weights is None}
 
 
-def make(settings: SNESSettings, dim: int) -> SNES:
+def make(settings, dim: int) -> SNES:
     sigma_lr = settings.snes_sigma_lr if settings.snes_sigma_lr is not None else default_sigma_lr(dim)
     return SNES(settings.popsize, settings.sigma, settings.snes_lr, sigma_lr)
 
 
-STRATEGY = StrategyEntry(make, SNESSettings)  # members sampled independently: any population
+PLUGIN = StrategyPlugin("snes", about="separable NES", settings=SNESSettings, make=make,
+                        pairs=False)  # members sampled independently: any population

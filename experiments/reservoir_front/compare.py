@@ -38,7 +38,8 @@ import envs  # noqa: E402
 from cli.errors import USER_ERRORS, Parser, explained, say  # noqa: E402
 from cli.flags import positive_int, seed_value, threads_value  # noqa: E402
 from cli.hints import EVALUATE_FLAGS, EVALUATE_SCRIPTS, TRAIN_SCRIPTS  # noqa: E402
-from cli.train import check_loggers, config_from_args, training_parser  # noqa: E402
+from cli.reporting import check_loggers  # noqa: E402
+from cli.train import config_from_args, training_parser  # noqa: E402
 from envs import ProblemSpec  # noqa: E402
 from es.files import atomic_write_text  # noqa: E402
 from es.runfolder import named_file  # noqa: E402
@@ -113,7 +114,7 @@ def check_arm(args: argparse.Namespace, extra: list[str], arm: str) -> None:
     kind = ARMS[arm][0]
     parser = training_parser(TRAIN_SCRIPTS[kind], "", kind, folder=str(args.folder))
     config = config_from_args(kind, parser.parse_args(arm_flags(args, extra, arm, args.seeds[0], args.folder)))
-    check_loggers(config)
+    check_loggers(config.log)
     spec = ProblemSpec(config.env.env_ids, config.policy, config.env.recipe_modules, config.env.max_episode_steps)
     with explained("cannot make the environments"):
         problem = spec.build()

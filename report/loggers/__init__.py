@@ -1,13 +1,15 @@
-"""The run's experiment trackers (``--logger``): the registry of loggers, their settings, and the one
-reporter of the loop that drives them (``Loggers``).
+"""The run's experiment trackers (``--logger``): the registry of loggers, their settings, and ``Loggers``, which
+drives the chosen ones for the training script (``cli.train``: it makes them, hands them each generation's row
+as the loop gives it, and closes them).
 
     tensorboard  TensorBoard scalars in <run>/tensorboard (``--tensorboard`` is the same as --logger tensorboard)
     wandb        Weights & Biases, offline where no login is configured
     mlflow       MLflow, in MLFLOW_TRACKING_URI / --mlflow_uri or a SQLite database in the run folder
 
-A logger is one module (``report.loggers.base``: what it receives and declares) and one line in
-``LOGGERS``; ``LogSettings``, config.json's ``log`` section, joins every logger's settings to the choice of
-loggers, so their flags, TOML keys, config.json keys, checks and docs come from their declarations.
+A logger is one module, which declares its plug-in (``report.loggers.base``: what it receives and declares),
+and one line in ``LOGGERS``; ``LogSettings``, config.json's ``log`` section, joins each logger's settings to
+the choice of loggers (``plugins.joined``), so their flags, TOML keys, config.json keys, checks and docs come
+from their declarations.
 """
 
 from __future__ import annotations
@@ -16,43 +18,38 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from es.loop import Reporter
+from plugins import Registry, joined
 from report.loggers import mlflow, tensorboard, wandb
-from report.loggers.base import GROUP, LoggerEntry, LoggerSettings, scalars
+from report.loggers.base import GROUP, LoggerPlugin, scalars
 from settings import check, setting
 
-LOGGERS: dict[str, LoggerEntry] = {
-    "tensorboard": tensorboard.LOGGER,
-    "wandb": wandb.LOGGER,
-    "mlflow": mlflow.LOGGER,
-}
+LOGGERS: Registry[LoggerPlugin] = Registry("logger", [
+    tensorboard.PLUGIN,
+    wandb.PLUGIN,
+    mlflow.PLUGIN,
+])
 
 
 @dataclass(frozen=True)
-class Choice(LoggerSettings):
+class LoggerChoice:
+    """Where the run is logged beside its files; none of it changes a result. Then (``LogSettings``) each
+    logger's own settings, in the registry's order."""
+
     logger: tuple[str, ...] = setting((), choices=LOGGERS, aliases={"tensorboard": "tensorboard"}, resumable=True,
                                       metavar="NAME", group=GROUP, shown_default="none",
                                       help="also send the run to these experiment trackers: its settings once, every "
                                            "metrics.csv row at its generation, its figures and final weights at the "
                                            "end (docs/modern-es.md)")
 
-
-def _own_settings() -> tuple[type, ...]:
-    """Each logger's settings class, once, the registry's order reversed (its fields then come in that order)."""
-    return tuple(reversed([cls for cls in dict.fromkeys(entry.settings for entry in LOGGERS.values())
-                           if cls is not LoggerSettings]))
-
-
-@dataclass(frozen=True)
-class LogSettings(*_own_settings(), Choice):
-    """Where the run is logged beside its files; none of it changes a result."""
-
     def __post_init__(self) -> None:
         check(self)
         object.__setattr__(self, "logger", tuple(dict.fromkeys(self.logger)))  # each once, in the order given
 
 
-def missing(settings: LogSettings) -> str | None:
+LogSettings = joined(LoggerChoice, LOGGERS, name="LogSettings", module=__name__)
+
+
+def missing(settings) -> str | None:
     """One line for the first logger whose packages are not installed, with its install command."""
     for name in settings.logger:
         absent = LOGGERS[name].missing()
@@ -63,16 +60,19 @@ def missing(settings: LogSettings) -> str | None:
     return None
 
 
-class Loggers(Reporter):
-    """The loggers ``settings`` name, as one reporter of the loop. A logger that fails as the run starts stops
-    it (one line); one that fails later is dropped with a warning, and the run goes on."""
+class Loggers:
+    """The loggers ``settings`` name, made for the run folder ``run_folder``, in the order the training script
+    calls them. A logger that fails as the run starts stops it (one line); one that fails later is dropped with a
+    warning, and the run goes on."""
 
-    def __init__(self, settings: LogSettings, run_folder: Path, extra_columns: tuple[str, ...] = (),
+    def __init__(self, settings, run_folder: Path, extra_columns: tuple[str, ...] = (),
                  say: Callable[[str], None] = print):
         self.loggers = {name: LOGGERS[name].make(settings, Path(run_folder), say) for name in settings.logger}
         self.extra_columns, self.say, self.done = extra_columns, say, False
 
     def begin(self, record: dict, generation: int) -> dict:
+        """The run's settings as config.json records them, as it starts (generation 0) or resumes after
+        ``generation``; what config.json should record of the loggers (their trackers' run ids)."""
         recorded = {}
         for name, logger in self.loggers.items():
             try:
@@ -83,15 +83,18 @@ class Loggers(Reporter):
         return recorded
 
     def generation(self, row: dict) -> None:
+        """A generation's metrics row."""
         step, values = int(row["generation"]), scalars(row, self.extra_columns)
         self._each(lambda logger: logger.log(step, values))
 
-    def saved(self, folder, rows: list[dict]) -> None:
+    def saved(self) -> None:
+        """After a save of the run's files."""
         self._each(lambda logger: logger.flush())
 
-    def finished(self, folder) -> None:
-        figures = sorted(folder.path.glob("*.png"))
-        weights = sorted(path for prefix in ("last", "best") for path in folder.path.glob(f"{prefix}*"))
+    def finished(self, run_folder: Path) -> None:
+        """The run has run all its generations: its figures and final weight files."""
+        figures = sorted(Path(run_folder).glob("*.png"))
+        weights = sorted(path for prefix in ("last", "best") for path in Path(run_folder).glob(f"{prefix}*"))
         self._each(lambda logger: logger.artefacts(figures, weights))
         self.done = True
 

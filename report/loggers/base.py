@@ -16,10 +16,11 @@ A logger (``Logger``) receives, in this order:
   and its final weight files (``last*`` and ``best*``: the .dat files and observation statistics);
 - ``close(finished)`` when the process ends, finished or not.
 
-Its entry (``LoggerEntry``): the factory, the modules it imports (checked before anything starts: a
+Its plug-in (``LoggerPlugin``, ``plugins``): its name, what it is, its settings (a frozen dataclass of its own
+fields made with ``settings.setting()``: each then has an effect only with ``--logger <its name>``, and
+config.json records it only then), the factory, the modules it imports (checked before anything starts: a
 missing one is refused in one line with its install command) and the extra that installs them
-(``requirements-<extra>.txt``), and its settings: a frozen dataclass subclassing ``LoggerSettings``
-whose fields, made with ``settings.setting()``, each require ``--logger <its name>``.
+(``requirements-<extra>.txt``), required with them.
 """
 
 from __future__ import annotations
@@ -34,14 +35,10 @@ from typing import Protocol
 from urllib.parse import urlsplit
 
 from es.files import METRICS_COLUMNS
+from plugins import Plugin
 
 GROUP = "experiment trackers (--logger)"  # --help's group of the loggers' flags
 REACH_SECONDS = 5  # the longest a tracker may take to answer as the run starts (docs/flags.md)
-
-
-@dataclass(frozen=True)
-class LoggerSettings:
-    """The settings of a logger that has none of its own; the base of those that have."""
 
 
 class Logger(Protocol):
@@ -61,14 +58,18 @@ class Logger(Protocol):
         """When the process ends; ``finished``: the run has run all its generations."""
 
 
-@dataclass(frozen=True)
-class LoggerEntry:
-    """A logger as the registry holds it."""
+@dataclass(frozen=True, kw_only=True)
+class LoggerPlugin(Plugin):
+    """A logger as its module declares it (``plugins.Plugin``: its name, what it is, its settings)."""
 
-    make: Callable[..., Logger]  # (the run's LogSettings, its folder) -> the logger
+    make: Callable[..., Logger]  # (the run's LogSettings, its folder, the run's say) -> the logger
     modules: tuple[str, ...] = ()  # what it imports beside the project's requirements
-    extra: str = ""  # the extra that installs them: requirements-<extra>.txt, pyproject.toml's [<extra>]
-    settings: type[LoggerSettings] = LoggerSettings  # the dataclass declaring its own settings
+    extra: str = ""  # what installs them (required with them): requirements-<extra>.txt, pyproject.toml's [<extra>]
+
+    def __post_init__(self) -> None:
+        if self.modules and not self.extra:
+            raise ValueError(f"logger {self.name!r} imports {', '.join(self.modules)}: name the extra that installs "
+                             "them (extra=...)")
 
     @property
     def install_hint(self) -> str:

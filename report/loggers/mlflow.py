@@ -32,10 +32,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import urlsplit, urlunsplit
 
-from report.loggers.base import GROUP, REACH_SECONDS, LoggerEntry, LoggerSettings, unreachable
+from report.loggers.base import GROUP, REACH_SECONDS, LoggerPlugin, unreachable
 from settings import setting
 
-WITH_MLFLOW = ("logger", "mlflow")  # what its settings require
 SECTIONS = ("es", "policy", "env", "run", "log")  # config.json's settings, logged as parameters
 STEP_KEY = "total_env_steps"  # a column every row has, finite: which steps the MLflow run holds
 BATCH = 100  # parameters per request (MLflow's limit)
@@ -44,14 +43,14 @@ PORTS = {"http": 80, "https": 443, "postgresql": 5432, "mysql": 3306, "mssql": 1
 
 
 @dataclass(frozen=True)
-class MLflowSettings(LoggerSettings):
-    mlflow_uri: str | None = setting(None, nonempty=True, requires=WITH_MLFLOW, resumable=True, group=GROUP,
+class MLflowSettings:
+    mlflow_uri: str | None = setting(None, nonempty=True, resumable=True, group=GROUP,
                                      metavar="URI", shown_default="MLFLOW_TRACKING_URI, else sqlite:///<run>/mlflow/"
                                                                   "mlflow.db",
                                      help="the MLflow tracking store (a server's http URI, a database's)")
-    mlflow_experiment: str = setting("hebbian-es", nonempty=True, requires=WITH_MLFLOW, resumable=True, group=GROUP,
+    mlflow_experiment: str = setting("hebbian-es", nonempty=True, resumable=True, group=GROUP,
                                      metavar="NAME", help="the MLflow experiment of the run")
-    mlflow_run_id: str | None = setting(None, flag=None, derived=True, requires=WITH_MLFLOW,
+    mlflow_run_id: str | None = setting(None, flag=None, derived=True,
                                         help="the MLflow run's id, made at the run's start (a resume continues it)")
 
 
@@ -195,5 +194,6 @@ class MLflowLogger:
             self.client.set_terminated(self.run_id, "FINISHED" if finished else "KILLED")
 
 
-LOGGER = LoggerEntry(MLflowLogger, modules=("mlflow", "sqlalchemy", "alembic"), extra="mlflow",
-                     settings=MLflowSettings)
+PLUGIN = LoggerPlugin("mlflow", about="MLflow, in MLFLOW_TRACKING_URI / --mlflow_uri or a SQLite database in the "
+                                       "run folder", settings=MLflowSettings, make=MLflowLogger,
+                      modules=("mlflow", "sqlalchemy", "alembic"), extra="mlflow")

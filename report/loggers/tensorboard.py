@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from report.loggers.base import LoggerEntry
+from report.loggers.base import LoggerPlugin
 
 FOLDER = "tensorboard"
 
@@ -47,4 +47,5 @@ class TensorBoardLogger:
             self.writer.close()
 
 
-LOGGER = LoggerEntry(TensorBoardLogger, modules=("tensorboard",), extra="tensorboard")
+PLUGIN = LoggerPlugin("tensorboard", about="TensorBoard scalars in <run>/tensorboard", make=TensorBoardLogger,
+                      modules=("tensorboard",), extra="tensorboard")

@@ -25,20 +25,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import urlparse
 
-from report.loggers.base import GROUP, LoggerEntry, LoggerSettings, unreachable
+from report.loggers.base import GROUP, LoggerPlugin, unreachable
 from settings import setting
 
-WITH_WANDB = ("logger", "wandb")  # what its settings require
 DEFAULT_HOST = "https://api.wandb.ai"
 MODES = ("online", "offline", "disabled", "shared", "dryrun", "run")  # WANDB_MODE's values (wandb.Settings.mode)
 ONLINE = ("online", "shared", "run")  # those that reach the server
 
 
 @dataclass(frozen=True)
-class WandbSettings(LoggerSettings):
-    wandb_project: str = setting("hebbian-es", nonempty=True, requires=WITH_WANDB, resumable=True, group=GROUP,
+class WandbSettings:
+    wandb_project: str = setting("hebbian-es", nonempty=True, resumable=True, group=GROUP,
                                  metavar="NAME", help="the W&B project of the run")
-    wandb_run_id: str | None = setting(None, flag=None, derived=True, requires=WITH_WANDB,
+    wandb_run_id: str | None = setting(None, flag=None, derived=True,
                                        help="the W&B run's id, made at the run's start (a resume continues it)")
 
 
@@ -112,4 +111,5 @@ class WandbLogger:
             self.run.finish(exit_code=0 if finished else 1)
 
 
-LOGGER = LoggerEntry(WandbLogger, modules=("wandb",), extra="wandb", settings=WandbSettings)
+PLUGIN = LoggerPlugin("wandb", about="Weights & Biases, offline where no login is configured", settings=WandbSettings,
+                      make=WandbLogger, modules=("wandb",), extra="wandb")
