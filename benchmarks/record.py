@@ -161,3 +161,27 @@ def read(path: Path) -> dict:
     if missing:
         raise ValueError(f"{path}: not a benchmark record (no {', '.join(sorted(missing))})")
     return record
+
+
+STAMPED = re.compile(r"-\d{8}T\d{6}Z\.json$")  # a record's file name: its command's name, then when it was taken
+
+
+def newest(name: str, results: Path = RESULTS) -> tuple[Path, dict]:
+    """The newest record of the command ``name`` (``results/<name>-<time>.json``) not taken on a loaded machine, and
+    its path; ValueError where there is none. A page names the command, never one record: a new record of it
+    renders everywhere the figure appears."""
+    import glob
+
+    stamped = sorted(path for path in results.glob(f"{glob.escape(name)}-*.json")
+                     if STAMPED.search(path.name) and path.name[:len(name)] == name
+                     and not STAMPED.sub("", path.name[len(name):]))
+    where = results.relative_to(ROOT) if results.is_relative_to(ROOT) else results
+    if not stamped:
+        raise ValueError(f"{name}: no record {where}/{name}-<time>.json")
+    for path in reversed(stamped):
+        record = read(path)
+        if not record["loaded"]:
+            return path, record
+    raise ValueError(f"{name}: every record was taken on a loaded machine (the newest at load "
+                     f"{max(record['load_before'], record['load_after']):.2f} on {record['cores']} cores); "
+                     "measure again on a quiet machine")

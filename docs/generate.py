@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import glob
 import importlib
 import os
 import re
@@ -58,10 +57,11 @@ import record as records  # noqa: E402  (benchmarks/record.py: what a record hol
 
 from cli.errors import USER_ERRORS  # noqa: E402
 from es.files import read_json  # noqa: E402
-from experiments import campaign  # noqa: E402
+from experiments import campaign, cost  # noqa: E402
 from experiments.paper import (  # noqa: E402
     HELD_OUT_SEED,
     campaign_entries,
+    campaign_plan,
     latest_run,
     load_experiment,
     report_folder,
@@ -149,26 +149,13 @@ def number(value: float) -> str:
         else f"{value:.3f}"
 
 
-STAMPED = re.compile(r"-\d{8}T\d{6}Z\.json$")  # a record's file name: its command's name, then when it was taken
-
-
 def published(name: str, results: Path) -> tuple[Path, dict]:
-    """The newest record of the command ``name`` (``results/<name>-<time>.json``) not taken on a loaded machine, and
-    its path; FigureError where there is none. A page names the command, never one record: a new record of it
-    renders everywhere the figure appears."""
-    stamped = sorted(path for path in results.glob(f"{glob.escape(name)}-*.json")
-                     if STAMPED.search(path.name) and path.name[:len(name)] == name
-                     and not STAMPED.sub("", path.name[len(name):]))
-    where = results.relative_to(ROOT) if results.is_relative_to(ROOT) else results
-    if not stamped:
-        raise FigureError(f"{name}: no record {where}/{name}-<time>.json")
-    for path in reversed(stamped):
-        record = records.read(path)
-        if not record["loaded"]:
-            return path, record
-    raise FigureError(f"{name}: every record was taken on a loaded machine (the newest at load "
-                      f"{max(record['load_before'], record['load_after']):.2f} on {record['cores']} cores); "
-                      "measure again on a quiet machine")
+    """The newest record of the command ``name`` not taken on a loaded machine, and its path (``record.newest``);
+    FigureError where there is none."""
+    try:
+        return records.newest(name, results)
+    except ValueError as error:  # none, every one loaded, a file that is not a record
+        raise FigureError(str(error)) from None
 
 
 def figure(name: str, measure: str, page: Path, results: Path = records.RESULTS) -> str:
@@ -232,6 +219,7 @@ RESULT = re.compile(r"(?<!`)(<!-- (?P<what>result|headline|spread|best):(?P<run>
 FRAMES = re.compile(r"(?<!`)(<!-- frames:(?P<run>[\w.-]+) -->)(?P<text>.*?)(?P<end><!-- end frames -->)")
 REPORT = re.compile(r"(?<!`)(<!-- report:(?P<run>\w+) (?P<environment>[\w.:-]+) -->)(?P<text>.*?)"
                     r"(?P<end><!-- end report -->)")
+REMAINING = re.compile(r"(?<!`)(<!-- remaining -->)(?P<text>.*?)(?P<end><!-- end remaining -->)")
 PENDING = "not yet: training in the campaign"
 FRAMES_PENDING = "(the agent's frames, once its run is evaluated)"
 REPORT_PENDING = "not yet: the campaign's seeds are still training"
@@ -414,6 +402,16 @@ def report(experiment: str, environment: str, page: Path, runs: Path = RUNS,
            f"({link(folder / 'summary.md', page)})){later}"
 
 
+def remaining(page: Path, runs: Path = RUNS) -> str:
+    """The campaign's remaining runs and what they will cost, projected from its completed runs in ``runs``
+    (``experiments/cost.py``: on the workers those ran on, and on more where a benchmark's record projects it)."""
+    try:
+        plan = campaign_plan(runs)
+    except (KeyError, TypeError, ValueError, OSError, *USER_ERRORS) as error:
+        raise FigureError(f"the campaign's runs in {runs} cannot be read ({type(error).__name__}: {error})") from None
+    return cost.summary(cost.project([planned for _, planned in plan]), page)
+
+
 def render_results(text: str, page: Path, runs: Path = RUNS, behind: list[str] | None = None) -> str:
     """``text`` with every campaign result and frame strip rewritten from its run; given ``behind`` (a check),
     a marker that still reads as pending while its run has been evaluated is left as it is, and named there."""
@@ -427,8 +425,17 @@ def render_results(text: str, page: Path, runs: Path = RUNS, behind: list[str] |
     text = RESULT.sub(lambda match: rewrite(match, writers[match["what"]](match["run"], match["environment"], page,
                                                                           runs), PENDING), text)
     text = FRAMES.sub(lambda match: rewrite(match, frames(match["run"], page, runs), FRAMES_PENDING), text)
-    return REPORT.sub(lambda match: rewrite(match, report(match["run"], match["environment"], page, runs),
+    text = REPORT.sub(lambda match: rewrite(match, report(match["run"], match["environment"], page, runs),
                                             REPORT_PENDING), text)
+
+    def cost_now(match: re.Match) -> str:  # the campaign moves on at every chunk: a check names it, and goes on
+        rendered = remaining(page, runs)
+        if behind is not None and rendered != match["text"]:
+            behind.append("the campaign's remaining runs")
+            rendered = match["text"]
+        return match[1] + rendered + match["end"]
+
+    return REMAINING.sub(cost_now, text)
 
 
 def render(text: str, page: Path | None = None, behind: list[str] | None = None) -> str:

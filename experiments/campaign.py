@@ -278,6 +278,8 @@ class Progress:
     centre: float | None
     machines: str  # config.json's record of the machines (report.machine.machines_text)
     step_limit: int | None = None  # the most environment steps a generation can take (generation_step_limit)
+    seconds: tuple[float, ...] = ()  # each generation's, from the first to the one saved last (metrics.csv)
+    on: tuple[tuple[str, int], ...] = ()  # the CPU and the workers of each machine config.json records
 
     @property
     def complete(self) -> bool:
@@ -372,4 +374,6 @@ def measure(run_dir: Path) -> Progress:
         steps=sum(int(row["env_steps"]) for row in last) / len(last) if last else None,
         mean=float(rows[-1]["fitness_mean"]) if rows else None,
         centre=float(rows[-1]["center_return"]) if rows else None,
-        machines=machines_text(config.get("machines", [])), step_limit=generation_step_limit(config))
+        machines=machines_text(config.get("machines", [])), step_limit=generation_step_limit(config),
+        seconds=tuple(float(row["seconds"]) for row in rows),
+        on=tuple((entry["cpu"], entry["workers"]) for entry in config.get("machines", [])))

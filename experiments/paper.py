@@ -50,6 +50,7 @@ import subprocess
 import sys
 import time
 import tomllib
+from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -60,7 +61,7 @@ from cli.errors import USER_ERRORS, Parser, say  # noqa: E402
 from cli.flags import non_empty, positive_float, positive_int, seed_value, threads_value  # noqa: E402
 from cli.hints import EVALUATE_SCRIPTS, TRAIN_SCRIPTS  # noqa: E402
 from es.runfolder import named_file  # noqa: E402
-from experiments import campaign  # noqa: E402
+from experiments import campaign, cost  # noqa: E402
 from policies import KINDS  # noqa: E402
 from report.stats import DEFAULT_REPS  # noqa: E402
 
@@ -580,35 +581,64 @@ def entry_folder(args: argparse.Namespace) -> Path:
     return ROOT / experiment_folder(args, load_experiment(args)[1])
 
 
-def campaign_runs(runs: Path) -> list[tuple[str, Path]]:
-    """The campaign's runs, in its order, each as its name ("carracing hebbian seed 1") and its experiment's
-    folder in ``runs``."""
+@dataclass(frozen=True)
+class CampaignRun:
+    """A run of the campaign: its name ("carracing hebbian seed 1"), its experiment's folder and what it asks for."""
+
+    name: str
+    folder: Path
+    args: argparse.Namespace
+    experiment: dict
+
+    def planned(self, progress: campaign.Progress | None) -> cost.Planned:
+        """The run as the projection of its cost sees it, ``progress`` its newest run's (None: not started)."""
+        run = self.experiment["run"]
+        return cost.Planned(
+            name=self.name, experiment=self.args.experiment, kind=self.args.kind,
+            group=shlex.join([self.args.experiment, self.args.kind, *overrides(self.args, "popsize", "generations")]),
+            seed=self.args.seed if self.args.seed is not None else run["seed"],
+            total=self.args.generations if self.args.generations is not None else run["generations"],
+            progress=progress)
+
+
+def campaign_runs(runs: Path) -> list[CampaignRun]:
+    """The campaign's runs, in its order, each with its experiment's folder in ``runs``."""
     named = []
     for args in campaign_entries():
-        name = run_name(args, load_experiment(args)[1])
-        named.append((name.replace("_seed", " seed ").replace("_", " "), runs / name))
+        experiment = load_experiment(args)[1]
+        name = run_name(args, experiment)
+        named.append(CampaignRun(name.replace("_seed", " seed ").replace("_", " "), runs / name, args, experiment))
     return named
+
+
+def campaign_plan(runs: Path) -> list[tuple[CampaignRun, cost.Planned]]:
+    """Each run of the campaign with its newest run's progress (``campaign.measure``, whose errors it raises)."""
+    return [(entry, entry.planned(None if (run_dir := latest_run(entry.folder)) is None else campaign.measure(run_dir)))
+            for entry in campaign_runs(runs)]
 
 
 def status() -> int:
     """Each campaign run: generations done of the total, the training time metrics.csv records, the mean time
     and environment steps of the last ten generations, the last population mean and centre, for a run not
     yet complete the time its remaining generations would take at the last ten's pace, and the machines it ran
-    on (config.json's record)."""
-    code = 0
-    for name, folder in campaign_runs(ROOT / RESULTS):
-        run_dir = latest_run(folder)
+    on (config.json's record); for every run not yet complete, started or not, its projection from the completed
+    runs of its group (``cost.project``); then the campaign's remaining time in all (``cost.summary``)."""
+    code, lines, plan = 0, {}, []
+    for entry in campaign_runs(ROOT / RESULTS):
+        run_dir = latest_run(entry.folder)
         if run_dir is None:
-            say(f"{name}: not started")
+            lines[entry.name] = f"{entry.name}: not started"
+            plan.append(entry.planned(None))
             continue
         try:
             progress = campaign.measure(run_dir)
         except (OSError, KeyError, TypeError, *USER_ERRORS, ValueError) as error:  # a hand-edited or damaged file
-            print(f"paper.py: error: {name}: {shown(run_dir)} cannot be read ({type(error).__name__}: {error})",
+            print(f"paper.py: error: {entry.name}: {shown(run_dir)} cannot be read ({type(error).__name__}: {error})",
                   file=sys.stderr)
             code = 2
             continue
-        line = (f"{name}: {shown(run_dir)}: generation {progress.done} of {progress.total}"
+        plan.append(entry.planned(progress))
+        line = (f"{entry.name}: {shown(run_dir)}: generation {progress.done} of {progress.total}"
                 + (" (evaluated)" if progress.evaluated else ""))
         if progress.pace is not None:
             line += (f"; {progress.hours:.2f} h of training; the last {progress.paced} generations "
@@ -620,12 +650,19 @@ def status() -> int:
                     line += f", at most {progress.hours_at_most:.1f} h if every episode ran to its time limit"
         if progress.machines:
             line += f"; on {progress.machines}"
+        lines[entry.name] = line
+    projections = cost.project(plan)
+    for projection in projections:
+        lines[projection.planned.name] += f"; {projection.line()}"
+    for line in lines.values():
         say(line)
+    say(f"remaining: {cost.summary(projections)}")
     return code
 
 
 def progress_page(runs: Path) -> str:
-    """The campaign's runs in ``runs`` as a Markdown table (``runs/progress.md``, written at every chunk's end)."""
+    """The campaign's runs in ``runs`` as a Markdown table (``runs/progress.md``, written at every chunk's end),
+    and what its remaining runs will cost (``cost.summary``)."""
     lines = ["# The campaign's runs", "",
              "How far each run of `experiments/paper/campaign.toml` got, written by `experiments/paper.py` at the "
              "end of every chunk from the run's own files: the generation its `checkpoint.npz` holds, the "
@@ -634,26 +671,36 @@ def progress_page(runs: Path) -> str:
              "figures are those of the generations done so far, and its remaining time is the last generations' "
              "pace times the generations left. Generations grow longer as a run learns to stay in its episodes, so "
              "early in a run that says too little; the bound beside it is every remaining episode run to its "
-             "environment's time limit at the last generations' cost per environment step.", "",
+             "environment's time limit at the last generations' cost per environment step. Every run not yet "
+             "complete, started or not, is also projected from the completed runs of its experiment and kind (the "
+             "seeds named): the mean of the time they took for the generations it has left, the fastest and the "
+             "slowest of them in brackets.", "",
              "| run | generation | training so far | last generations, each | remaining, at that pace; at most "
-             "| population mean, centre | machines |",
-             "|---|---|---|---|---|---|---|"]
-    for name, folder in campaign_runs(runs):
-        run_dir = latest_run(folder)
-        if run_dir is None:
-            lines.append(f"| {name} | not started | | | | | |")
+             "| remaining, from the completed runs of its kind | population mean, centre | machines |",
+             "|---|---|---|---|---|---|---|---|"]
+    plan = campaign_plan(runs)
+    projections = {projection.planned.name: projection for projection in cost.project([p for _, p in plan])}
+    for entry, planned in plan:
+        projection = projections.get(entry.name)
+        projected = ("" if projection is None else "no completed run of its kind" if projection.estimate is None
+                     else f"{projection.estimate.text()}, from {projection.sources_text()}")
+        progress = planned.progress
+        if progress is None:
+            lines.append(f"| {entry.name} | not started | | | | {projected} | | |")
             continue
-        progress = campaign.measure(run_dir)
         state = ("complete, evaluated" if progress.evaluated else "complete, not yet evaluated" if progress.complete
                  else "**partial**")
-        cost = (f"{progress.pace:.1f} s, {progress.steps:,.0f} env steps" if progress.pace is not None else "")
+        pace = (f"{progress.pace:.1f} s, {progress.steps:,.0f} env steps" if progress.pace is not None else "")
         left = ("" if progress.hours_left is None
                 else f"about {progress.hours_left:.1f} h ({progress.hours + progress.hours_left:.1f} h in all)"
                 + ("" if progress.hours_at_most is None else
                    f"; at most {progress.hours_at_most:.1f} h ({progress.hours + progress.hours_at_most:.1f} h)"))
         fitness = f"{progress.mean:.1f}, {progress.centre:.1f}" if progress.mean is not None else ""
-        lines.append(f"| [{name}]({run_dir.relative_to(runs).as_posix()}) | {progress.done} of {progress.total}, "
-                     f"{state} | {progress.hours:.2f} h | {cost} | {left} | {fitness} | {progress.machines} |")
+        run_dir = latest_run(entry.folder)
+        lines.append(f"| [{entry.name}]({run_dir.relative_to(runs).as_posix()}) | {progress.done} of {progress.total}, "
+                     f"{state} | {progress.hours:.2f} h | {pace} | {left} | {projected} | {fitness} | "
+                     f"{progress.machines} |")
+    lines += ["", f"**Remaining.** {cost.summary(list(projections.values()), runs / campaign.PROGRESS)}"]
     return "\n".join(lines) + "\n"
 
 

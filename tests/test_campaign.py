@@ -283,14 +283,16 @@ def test_the_status_says_how_far_each_run_got(tmp_path, monkeypatch, capsys):
                   folder=tmp_path / "results" / "carracing_static_seed1", budget=10)
     assert chunk.returncode == 0, chunk.stderr[-2000:]
     assert paper_script.main(["campaign", "--status"]) == 0
-    first, second = capsys.readouterr().out.strip().splitlines()
+    first, second, remaining = capsys.readouterr().out.strip().splitlines()
     run = run_of(tmp_path / "results" / "carracing_static_seed1")
     with open(run / "metrics.csv", newline="") as handle:
         rows = list(csv.DictReader(handle))
     hours = sum(float(row["seconds"]) for row in rows) / 3600
     assert first.startswith(f"carracing static seed 1: {run}: generation 3 of 3 (evaluated); {hours:.2f} h of training")
     assert f"population mean {float(rows[-1]['fitness_mean']):.1f}" in first
-    assert second == "ant static seed 1: not started"
+    assert second == "ant static seed 1: not started; no completed run of ant static to project from"
+    assert remaining == ("remaining: 1 run to train: not projected, no completed run of their kind yet: ant static "
+                         "seed 1.")
     assert paper_script.main(["carracing", "curves", "--runs", str(tmp_path / "results")]) == 0
     assert capsys.readouterr().out.strip() == f"wrote {tmp_path / 'results' / 'carracing_curves.png'} (static seed 1)"
     assert (tmp_path / "results" / "carracing_curves.png").read_bytes().startswith(b"\x89PNG")
@@ -334,14 +336,17 @@ def test_the_status_of_a_run_not_yet_complete_says_how_long_the_rest_takes(tmp_p
         last = list(csv.DictReader(handle))[:done][-10:]
     seconds, steps = [float(row["seconds"]) for row in last], [int(row["env_steps"]) for row in last]
     assert paper_script.main(["campaign", "--status"]) == 0
-    (line,) = capsys.readouterr().out.strip().splitlines()
+    line, remaining = capsys.readouterr().out.strip().splitlines()
     left = (30 - done) * sum(seconds) / len(seconds) / 3600
     # the bound: 4 members and the centre, 1 episode each, every one to CarRacing's 1000 steps, at the same cost
     # per step as the last generations'
     most = (30 - done) * 5 * 1000 * sum(seconds) / sum(steps) / 3600
     assert line.startswith(f"carracing hebbian seed 1: {run}: generation {done} of 30; ")
     assert line.endswith(f"; at that pace about {left:.1f} h more, at most {most:.1f} h if every episode ran to its "
-                         f"time limit; on {cpu_model()}, 2 workers")
+                         f"time limit; on {cpu_model()}, 2 workers; no completed run of carracing hebbian --popsize 4 "
+                         "--generations 30 to project from")
+    assert remaining == ("remaining: 1 run to train: not projected, no completed run of their kind yet: carracing "
+                         "hebbian seed 1.")
 
     # the chunk wrote the same, partial, beside the runs, before its pid file went: the pages a stop hook commits
     assert f"campaign: wrote {tmp_path / 'results' / 'progress.md'} and " in output
@@ -352,12 +357,117 @@ def test_the_status_of_a_run_not_yet_complete_says_how_long_the_rest_takes(tmp_p
     assert row.startswith(f"| [carracing hebbian seed 1](carracing_hebbian_seed1/{run.name}) | {done} of 30, "
                           f"**partial** | {hours:.2f} h | ")
     assert f"| about {left:.1f} h ({hours + left:.1f} h in all); at most {most:.1f} h ({hours + most:.1f} h) |" in row
-    assert row.endswith(f"| {cpu_model()}, 2 workers |")
-    assert "| carracing static seed 1 | not started | | | | | |" in rows  # the campaign's next run, in its order
+    assert row.endswith(f"| no completed run of its kind | {float(last[-1]['fitness_mean']):.1f}, "
+                        f"{float(last[-1]['center_return']):.1f} | {cpu_model()}, 2 workers |")
+    # the campaign's next run, in its order
+    assert "| carracing static seed 1 | not started | | | | no completed run of its kind | | |" in rows
     assert (tmp_path / "results" / "carracing_curves.png").read_bytes().startswith(b"\x89PNG")
     assert paper_script.main(["carracing", "curves", "--runs", str(tmp_path / "results")]) == 0
     assert capsys.readouterr().out.strip() == (f"wrote {tmp_path / 'results' / 'carracing_curves.png'} "
                                                f"(hebbian seed 1, partial: generation {done} of 30)")
+
+
+def duration(hours: float) -> str:
+    return f"{hours:.1f} h" if hours >= 1 else f"{hours * 60:.0f} min" if hours * 60 >= 1 else f"{hours * 3600:.1f} s"
+
+
+def estimate(hours: list[float]) -> str:
+    """"about 4.5 s (4.1–4.9 s)": the mean of ``hours``, the fastest and the slowest (one unit written once)."""
+    return spread(sum(hours) / len(hours), min(hours), max(hours))
+
+
+def spread(mean: float, fastest: float, slowest: float) -> str:
+    low, high = duration(fastest), duration(slowest)
+    if low == high:
+        return f"about {duration(mean)}"
+    if low.split()[1] == high.split()[1]:
+        low = low.split()[0]
+    return f"about {duration(mean)} ({low}–{high})"
+
+
+def test_the_status_projects_each_remaining_run_from_the_completed_runs_of_its_kind(tmp_path, monkeypatch, capsys):
+    """A run not yet complete, started or not, takes what the completed runs of its experiment, kind and settings
+    took for the generations it has left: their mean, the fastest and the slowest; on 16 workers times the ratio of
+    the car_racing record's projections, and no figure where no record projects the kind; the campaign's remaining
+    runs added up, in the status and on the progress page."""
+    import experiments.paper as paper_script
+    from benchmarks import record as records
+    from experiments import cost
+
+    small = "--popsize 4 --episodes 1 --generations 30"
+    entries = tmp_path / "campaign.toml"
+    entries.write_text("runs = [" + ", ".join(f'"carracing hebbian --seed {seed} {small}"' for seed in (1, 2, 3, 4))
+                       + f', "carracing static --seed 1 {small}"]\n')
+    monkeypatch.setattr(paper_script, "CAMPAIGN", entries)
+    monkeypatch.setattr(paper_script, "RESULTS", tmp_path / "results")
+    results = tmp_path / "results"
+    for seed in (1, 2):  # complete: trained as a chunk would, the evaluation left out (the projection reads none)
+        command = ["train_hebb.py", "--config", "experiments/paper/carracing_hebbian.toml", "--folder",
+                   str(results / f"carracing_hebbian_seed{seed}"), "--seed", str(seed), "--popsize", "4",
+                   "--generations", "30", "--threads", "2"]
+        done = subprocess.run([sys.executable, *command], cwd=ROOT, env=ENV, capture_output=True, text=True,
+                              timeout=600)
+        assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    chunk = start(*SMALL, "--seed", "3", "--generations", "30", folder=results / "carracing_hebbian_seed3")
+    wait_for_generations(results / "carracing_hebbian_seed3", 2)
+    chunk.send_signal(signal.SIGINT)
+    output, _ = chunk.communicate(timeout=120)
+    assert chunk.returncode == 130, output[-2000:]
+    done = read_checkpoint(run_of(results / "carracing_hebbian_seed3") / "checkpoint.npz").generation
+    assert 2 <= done < 30
+
+    def seconds(seed: int) -> list[float]:
+        with open(run_of(results / f"carracing_hebbian_seed{seed}") / "metrics.csv", newline="") as handle:
+            return [float(row["seconds"]) for row in csv.DictReader(handle)]
+
+    left = [sum(seconds(seed)[done:]) / 3600 for seed in (1, 2)]  # seed 3's remaining generations, as 1 and 2 took them
+    whole = [sum(seconds(seed)) / 3600 for seed in (1, 2)]  # seed 4's: all of them
+    path, record = records.newest("car_racing")
+    factor = (record["measures"]["projection_fast_16_workers"]["median"]
+              / record["measures"]["projection_fast_2_workers"]["median"])
+    group = "carracing hebbian --popsize 4 --generations 30"
+
+    def on_16(hours: list[float]) -> str:
+        return spread(sum(hours) / len(hours) * factor, min(hours) * factor, max(hours) * factor)
+
+    source = f"projected from {group} seeds 1, 2 ({cpu_model()}, 2 workers)"
+    assert paper_script.main(["campaign", "--status"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert len(lines) == 6 and lines[0].startswith("carracing hebbian seed 1: ") and lines[0].endswith(" workers")
+    assert lines[2].endswith(f"; {source}: {estimate(left)} of training left; on 16 workers {on_16(left)}")
+    assert lines[3] == (f"carracing hebbian seed 4: not started; {source}: {estimate(whole)} of training left; on 16 "
+                        f"workers {on_16(whole)}")
+    assert lines[4] == ("carracing static seed 1: not started; no completed run of carracing static --popsize 4 "
+                        "--generations 30 to project from")
+    # the runs added up: their means, their fastest and their slowest
+    added = spread(sum(left) / 2 + sum(whole) / 2, min(left) + min(whole), max(left) + max(whole))
+    assert lines[5].startswith(
+        f"remaining: 3 runs to train: {added} of training for the 2 projected, each run projected from the completed "
+        f"runs of its experiment and kind, on their machines ({cpu_model()}, 2 workers), the range adding up the "
+        f"fastest of them, and the slowest; not projected, no completed run of their kind yet: carracing static seed "
+        f"1. On 16 workers, {group} (2 runs): "), lines[5]
+    on_16_added = spread(sum(left) / 2 * factor + sum(whole) / 2 * factor, min(left) * factor + min(whole) * factor,
+                         max(left) * factor + max(whole) * factor)
+    assert lines[5].endswith(
+        f"(2 runs): {on_16_added}, their projection times {factor:.3g}, the ratio of the projections on 16 workers "
+        f"and on 2 in the benchmark's record {path.relative_to(ROOT)} ({cost.SCALING[('carracing', 'hebbian')].how}).")
+
+    paper_script.write_pages(results, "carracing")  # what a chunk writes at its end
+    assert capsys.readouterr().out.startswith(f"campaign: wrote {results / 'progress.md'}")
+    page = (results / "progress.md").read_text()
+    assert f"| {estimate(left)}, from {group} seeds 1, 2 |" in page
+    assert f"| carracing hebbian seed 4 | not started | | | | {estimate(whole)}, from {group} seeds 1, 2 | | |" in page
+    assert "| carracing static seed 1 | not started | | | | no completed run of its kind | | |" in page
+    link = Path(os.path.relpath(path, results)).as_posix()
+    assert "\n**Remaining.** 3 runs to train: " in page and f"[{path.name}]({link})" in page
+
+    monkeypatch.setattr(cost, "SCALING", {})  # no record projects the kind on 16 workers: no figure, and why
+    assert paper_script.main(["campaign", "--status"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines[3].endswith(f"{estimate(whole)} of training left; on 16 workers no figure: no benchmark record "
+                             "measures or projects such runs on 16 workers")
+    assert lines[5].endswith(f". On 16 workers no figure for {group} (2 runs): no benchmark record measures or "
+                             "projects such runs on 16 workers.")
 
 
 def test_a_generations_step_limit_is_its_episodes_each_to_its_time_limit(monkeypatch):
@@ -407,6 +517,9 @@ def test_a_chunks_pages_name_a_run_they_cannot_read_and_end_the_chunk_cleanly(tm
     assert sorted(path.name for path in tmp_path.iterdir()) == ["carracing_static_seed1"]
 
 
+NOT_STARTED = "ant static seed 1: not started; no completed run of ant static to project from"
+
+
 def test_the_status_names_a_run_it_cannot_read_and_goes_on(tmp_path, monkeypatch, capsys):
     import experiments.paper as paper_script
 
@@ -420,7 +533,7 @@ def test_the_status_names_a_run_it_cannot_read_and_goes_on(tmp_path, monkeypatch
     (broken / "config.json").write_text('{"run": {"generations": 300}}')
     assert paper_script.main(["campaign", "--status"]) == 2
     captured = capsys.readouterr()
-    assert captured.out.strip() == "ant static seed 1: not started"
+    assert captured.out.strip().splitlines()[0] == NOT_STARTED
     assert captured.err.strip().startswith(f"paper.py: error: carracing static seed 1: {broken} cannot be read "
                                            "(RunFolderError: cannot resume from")
 
@@ -476,7 +589,7 @@ def test_the_status_and_a_chunks_pages_name_a_config_json_of_the_wrong_types(tmp
     (broken / "config.json").write_text(config)
     assert paper_script.main(["campaign", "--status"]) == 2
     captured = capsys.readouterr()
-    assert captured.out.strip() == "ant static seed 1: not started"
+    assert captured.out.strip().splitlines()[0] == NOT_STARTED
     assert captured.err.strip() == (f"paper.py: error: carracing static seed 1: {broken} cannot be read (ValueError: "
                                     f"{broken}/{problem})")
     paper_script.write_pages(tmp_path / "results", "carracing")  # what a chunk writes at its end

@@ -726,6 +726,26 @@ def test_a_campaign_result_not_yet_evaluated_is_pending_and_a_late_page_is_behin
     assert generate.PENDING not in generate.render_results(written, page, tmp_path)  # a rewrite fills it in
 
 
+def test_the_campaigns_remaining_runs_are_rendered_and_a_later_state_is_behind(evaluated_runs):
+    """``<!-- remaining -->`` holds the campaign's remaining runs, projected from the runs' files (experiments/cost.py);
+    the runs move on at every chunk, so a check leaves a page written before as it is, and names it."""
+    from experiments.paper import campaign_entries
+
+    page = ROOT / "experiments" / "README.md"
+    written = "<!-- remaining -->old<!-- end remaining -->"
+    rendered = generate.render_results(written, page, evaluated_runs)
+    # the small run in evaluated_runs is seed 1 of CarRacing Hebbian, 2 of the campaign's 300 generations: no run is
+    # complete, so none of the campaign's runs has a completed run of its kind to be projected from
+    assert rendered.startswith(f"<!-- remaining -->{len(campaign_entries())} runs to train: not projected, no "
+                               "completed run of their kind yet: carracing hebbian seed 1, carracing static seed 1, ")
+    assert rendered.endswith(".<!-- end remaining -->")
+    behind: list[str] = []
+    assert generate.render_results(written, page, evaluated_runs, behind) == written
+    assert behind == ["the campaign's remaining runs"]
+    behind = []
+    assert generate.render_results(rendered, page, evaluated_runs, behind) == rendered and behind == []
+
+
 def test_the_campaigns_report_is_rendered_once_every_evaluated_run_is_in(tmp_path):
     """<!-- report:EXPERIMENT ENVIRONMENT -->: the files experiments/paper.py's report writes (report/stats.py's
     own CSV writer here), pending until each kind has an evaluated run and the report holds every evaluated run
