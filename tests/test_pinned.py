@@ -13,14 +13,15 @@ alike, and the choice of ``best``.
 Each case runs in this process through the scripts' ``main(argv)`` with ``--threads 1``; a few run
 again with two worker processes, with Ray, and split by a resume, and must give the same hash.
 
-The hashes are those of x86-64 with glibc taking its functions' FMA code (a CPU with FMA and AVX2). CI runs this
-file again with the compiled code generated for an x86-64 without AVX or FMA (``NUMBA_CPU_NAME=generic``), with
-numpy's AVX-512 loops off and OpenBLAS's Haswell kernels (a CPU without AVX-512), and with glibc on its path for
-a CPU without FMA and AVX2 (``GLIBC_TUNABLES``): every hash the same, but those of the cases in
-``C_LIBRARY_CASES``. Their simulators call the C library's exp, log, sin, cos and atan2 from compiled code at
-every step (MuJoCo, pyBullet, CarRacing's track and Box2D), and glibc picks those by the CPU's features when a
-program starts: on another path they may give other hashes (the two MuJoCo cases do), and the test then says
-so as an expected failure, naming the path. A case not listed must give its hash on every path.
+The hashes are those of x86-64 with glibc 2.36 taking its functions' FMA code (a CPU with FMA and AVX2). CI
+runs this file again with the compiled code generated for an x86-64 without AVX or FMA
+(``NUMBA_CPU_NAME=generic``), with numpy's AVX-512 loops off and OpenBLAS's Haswell kernels (a CPU without
+AVX-512), and with glibc on its path for a CPU without FMA and AVX2 (``GLIBC_TUNABLES``): every hash the
+same, but those of the cases in ``C_LIBRARY_CASES``. Their simulators call the C library's exp, log, sin, cos
+and atan2 at every step (MuJoCo's and pyBullet's compiled code, Box2D, CarRacing's track through Python's
+math), and glibc picks those by the CPU's features when a program starts: on another path they may give
+other hashes (the two MuJoCo cases do), and the test then says so as an expected failure, naming the path; so
+it does on another glibc version. A case not listed must give its hash on every path.
 """
 
 from __future__ import annotations
@@ -129,8 +130,8 @@ PINNED_OUTPUTS = {
     "conv-LSTM": "a30e959a3db86a49fc920fae2ff39b1c4c26323560f3ff23b8f6b371c33b6808",
 }
 
-# environment -> what in its step calls the C library's functions from compiled code; every environment of CASES
-# is here or in PORTABLE_ENVIRONMENTS
+# environment -> what calls the C library's exp, log, sin, cos or atan2 at each of its steps (compiled code, or
+# Python's math for CarRacing's track and car); every environment of CASES is here or in PORTABLE_ENVIRONMENTS
 C_LIBRARY_ENVIRONMENTS = {
     "CarRacing-v3": "CarRacing's track (cos, sin, atan2) and Box2D",
     "AntBulletEnv-v0": "pyBullet", "AntAsymRightBulletEnv-v0": "pyBullet",
@@ -150,7 +151,15 @@ def environments(case: str) -> list[str]:
 # case -> the simulator through which it depends on the C library (the list docs/reproducibility.md gives)
 C_LIBRARY_CASES = {case: C_LIBRARY_ENVIRONMENTS[names[0]] for case in CASES
                    if (names := environments(case))[0] in C_LIBRARY_ENVIRONMENTS}
-REFERENCE_PATH = "glibc's code for x86-64 CPUs with FMA and AVX2"  # the path the hashes were computed on
+REFERENCE_PATH = "glibc 2.36's code for x86-64 CPUs with FMA and AVX2"  # the path the hashes were computed on
+
+
+def cpu_flags() -> set[str]:
+    try:
+        return set(next(line.split(":", 1)[1].split() for line in Path("/proc/cpuinfo").read_text().splitlines()
+                        if line.startswith("flags")))
+    except (OSError, StopIteration):
+        return set()
 
 
 def c_library_path() -> str:
@@ -162,14 +171,9 @@ def c_library_path() -> str:
     masked = {name.lstrip("-") for tunable in os.environ.get("GLIBC_TUNABLES", "").split(":")
               if tunable.startswith("glibc.cpu.hwcaps=") for name in tunable.split("=", 1)[1].split(",")
               if name.startswith("-")}
-    try:
-        flags = set(next(line.split(":", 1)[1].split() for line in Path("/proc/cpuinfo").read_text().splitlines()
-                         if line.startswith("flags")))
-    except (OSError, StopIteration):
-        flags = set()
-    if {"FMA", "AVX2"} & masked or not {"fma", "avx2"} <= flags:
+    if {"FMA", "AVX2"} & masked or not {"fma", "avx2"} <= cpu_flags():
         return f"glibc {version}'s code for x86-64 CPUs without FMA and AVX2"
-    return REFERENCE_PATH
+    return f"glibc {version}'s code for x86-64 CPUs with FMA and AVX2"
 
 
 def assert_pinned(case: str, digest: str) -> None:
@@ -211,6 +215,16 @@ def test_every_environment_is_classed_and_the_c_library_cases_are_its_simulators
     assert sorted(C_LIBRARY_CASES) == ["hebbian MuJoCo, two bodies", "hebbian pixels", "hebbian pixels co-evolved",
                                        "hebbian several bodies", "static MuJoCo", "static pixels",
                                        "static several bodies"]
+
+
+def test_the_c_library_path_is_read_from_glibc_tunables(monkeypatch):
+    """What CI's step 5 sets makes every listed case's hash an allowed expected failure; nothing else does."""
+    if platform.libc_ver()[0] != "glibc" or platform.machine() != "x86_64":
+        pytest.skip("glibc's paths are x86-64's")
+    monkeypatch.setenv("GLIBC_TUNABLES", "glibc.malloc.check=0:glibc.cpu.hwcaps=-AVX2,-FMA,-AVX")
+    assert c_library_path().endswith("code for x86-64 CPUs without FMA and AVX2")
+    monkeypatch.setenv("GLIBC_TUNABLES", "glibc.cpu.hwcaps=-AVX512F")
+    assert c_library_path().endswith("without FMA and AVX2") == (not {"fma", "avx2"} <= cpu_flags())
 
 
 @pytest.mark.parametrize("case", list(CASES))
