@@ -94,31 +94,57 @@ class Registry(Mapping[str, P], Generic[P]):
         return f" for --{self.choice}" if self.choice else ""
 
 
+# what dataclasses makes for a class: not copied from a section's base to the class ``joined`` makes
+_MADE = {"__dict__", "__weakref__", "__dataclass_fields__", "__dataclass_params__", "__init__", "__repr__", "__eq__",
+         "__hash__", "__setattr__", "__delattr__", "__match_args__", "__annotations__", "__doc__", "__module__",
+         "__qualname__"}
+
+
 def joined(base: type, *registries: Registry, name: str, module: str) -> type:
-    """A frozen dataclass ``name`` (of ``module``, where it is bound to that name) subclassing ``base`` with
-    the settings of every plug-in of ``registries`` after base's fields, each marked with its owner. A field
-    that two of them declare, a field not made with ``settings.setting()`` and a registry whose choice
-    ``base`` and the plug-ins before it do not declare are refused."""
-    taken = {field.name for field in dataclasses.fields(base)}
-    fields = []
+    """A frozen dataclass ``name`` (of ``module``, where it is bound to that name) with ``base``'s fields and
+    methods, and after each registry's choice field the settings of every plug-in of that registry, in its
+    order, each marked with its owner. A field that two of them declare, a field not made with
+    ``settings.setting()`` and a registry whose choice no field before it declares are refused."""
+    hints = typing.get_type_hints(base)
+    fields = [(field.name, hints[field.name], _field(field, field.metadata.get("setting")))
+              for field in dataclasses.fields(base)]
+    taken = {field for field, *_ in fields}
     for registry in registries:
-        if registry.choice not in taken:
+        at = next((index for index, (field, *_) in enumerate(fields) if field == registry.choice), None)
+        if at is None:
             raise TypeError(f"{name}: no setting {registry.choice!r} chooses among {list(registry)}")
-        for plugin in registry.values():
-            if plugin.settings is None:
-                continue
-            hints = typing.get_type_hints(plugin.settings)
-            for field in dataclasses.fields(plugin.settings):
-                spec = field.metadata.get("setting")
-                where = f"{registry.choice} {plugin.name}'s setting {field.name!r}"
-                if not isinstance(spec, Spec):
-                    raise TypeError(f"{where} is not declared with settings.setting()")
-                if field.name in taken:
-                    raise TypeError(f"{where} is declared twice in {name}")
-                taken.add(field.name)
-                owned = dataclasses.replace(spec, owner=(registry.choice, plugin.name))
-                fields.append((field.name, hints[field.name],
-                               dataclasses.field(default=field.default, metadata={"setting": owned})))
-    made = dataclasses.make_dataclass(name, fields, bases=(base,), frozen=True)
+        owned = [entry for plugin in registry.values() for entry in _owned(registry, plugin)]
+        for field, _, made in owned:
+            if field in taken:
+                raise TypeError(f"{registry.choice} {made.metadata['setting'].owner[1]}'s setting {field!r} is "
+                                f"declared twice in {name}")
+            taken.add(field)
+        fields[at + 1:at + 1] = owned
+    methods = {key: value for key, value in vars(base).items() if key not in _MADE and key not in hints}
+    made = dataclasses.make_dataclass(name, fields, namespace=methods, frozen=True)
     made.__module__, made.__doc__ = module, base.__doc__  # pickled and shown as ``module.name``
     return made
+
+
+def _field(field: dataclasses.Field, spec: Spec | None) -> dataclasses.Field:
+    """A copy of ``field`` with ``spec`` as its setting."""
+    metadata = {**field.metadata, **({"setting": spec} if spec is not None else {})}
+    if field.default_factory is not dataclasses.MISSING:
+        return dataclasses.field(default_factory=field.default_factory, metadata=metadata)
+    return dataclasses.field(default=field.default, metadata=metadata)
+
+
+def _owned(registry: Registry, plugin: Plugin) -> list[tuple[str, object, dataclasses.Field]]:
+    """The fields of ``plugin``'s settings, each marked with its owner."""
+    if plugin.settings is None:
+        return []
+    hints = typing.get_type_hints(plugin.settings)
+    found = []
+    for field in dataclasses.fields(plugin.settings):
+        spec = field.metadata.get("setting")
+        if not isinstance(spec, Spec):
+            raise TypeError(f"{registry.choice} {plugin.name}'s setting {field.name!r} is not declared with "
+                            "settings.setting()")
+        found.append((field.name, hints[field.name],
+                      _field(field, dataclasses.replace(spec, owner=(registry.choice, plugin.name)))))
+    return found

@@ -11,13 +11,15 @@ Hydra's structured configs). Everything else about the option is derived from th
   effect only with its plug-in chosen, and a run records it only then (``chosen``).
 
 This module imports nothing of the project, so that every package (``es``, ``policies``, ``envs``) can
-declare its settings with it. To add an option, add one field, e.g. to ``es.settings.ESSettings``:
+declare its settings with it. To add an option, add one field, e.g. to OpenAI-ES's settings
+(``es.strategies.openai.OpenAISettings``, which ``es.settings.ESSettings`` joins):
 
     momentum: float = setting(0.9, help="with --optimizer momentum", low=0, high=1, high_open=True,
                               requires=("optimizer", "momentum"))
 
-and it is a flag of both training scripts, a TOML key of ``[es]``, a key of config.json, checked, and
-refused without ``--optimizer momentum``. The metadata (all optional but the default):
+and it is a flag of both training scripts, a TOML key of ``[es]``, a key of config.json (of the runs of
+``--strategy openai``), checked, and refused without ``--optimizer momentum``. The metadata (all optional but
+the default):
 
     help             the flag's help; the default is appended by cli.flags, once
     flag             the flag's name without dashes (default: the field's name); None: no flag, a key of

@@ -27,8 +27,8 @@ from policies.reservoir import BOUNDS, MAX_UNITS, Hyperparameters, ReservoirFron
 from settings import MODERN, SEED_RANGE, check, setting
 
 KINDS: Registry[Kind] = Registry("kind", [
-    networks.KIND,
     hebbian.KIND,
+    networks.KIND,
 ])
 
 RESERVOIR = "reservoir front end (ER-MRL's echo state network before the network)"
