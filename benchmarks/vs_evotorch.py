@@ -291,9 +291,9 @@ def main(argv: list[str] | None = None) -> int:
 
     logging.getLogger("evotorch").setLevel(logging.WARNING)
     # the record's name is its command's: the rows asked for, where they are not the default ones
-    rows = [value for value, default in ((args.strategies, "snes,pgpe"), (args.settings, ",".join(SETTINGS)))
-            if value != default]
-    record = Record("-".join(["vs_evotorch", args.environment, *rows]), ("evotorch", "rliable"), timed=False)
+    defaults = ((args.strategies, ["snes", "pgpe"]), (args.settings, list(SETTINGS)))
+    asked = [",".join(value) for value, default in defaults if value != default]
+    record = Record("-".join(["vs_evotorch", args.environment, *asked]), ("evotorch", "rliable"), timed=False)
     sized = ProblemSpec((args.environment,)).build()
     dim = sized.policy.num_params
     sized.close()
