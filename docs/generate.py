@@ -58,15 +58,11 @@ import record as records  # noqa: E402  (benchmarks/record.py: what a record hol
 from cli.errors import USER_ERRORS  # noqa: E402
 from es.files import read_json  # noqa: E402
 from experiments import campaign, cost  # noqa: E402
-from experiments.paper import (  # noqa: E402
-    HELD_OUT_SEED,
-    campaign_entries,
-    campaign_plan,
-    latest_run,
-    load_experiment,
-    report_folder,
-    run_name,
-)
+from experiments.paper_args import campaign_entries  # noqa: E402
+from experiments.paper_report import report_folder  # noqa: E402
+from experiments.paper_runs import HELD_OUT_SEED, latest_run, load_experiment, run_name  # noqa: E402
+from experiments.paper_status import campaign_plan  # noqa: E402
+from experiments.progress import measure  # noqa: E402
 
 MARKER = re.compile(r"(<!-- flags:(?P<script>\S+)(?: except (?P<other>\S+))? -->\n)(?P<table>.*?)(<!-- end flags -->)",
                     re.DOTALL)
@@ -275,7 +271,7 @@ def result(name: str, environment: str | None, page: Path, runs: Path = RUNS) ->
     run, evaluation, entry = found
     try:
         headline = scored(run, campaign.EVALUATION, evaluation, entry, page)
-        progress = campaign.measure(run)
+        progress = measure(run)
     except (KeyError, TypeError, ValueError, OSError, *USER_ERRORS) as error:
         raise FigureError(f"{name}: {run} is not a run this tool evaluated ({type(error).__name__}: {error})") from None
     return (f"{headline}, generation {progress.done} after {number(progress.hours)} h of training"

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from benchmarks import record as records
-from experiments.campaign import Progress
+from experiments.progress import Progress
 
 MORE_WORKERS = 16  # the larger machine the docs give the campaign's remaining time for
 

@@ -40,7 +40,7 @@ from cli.flags import defaults, given, positive_int, seed_value  # noqa: E402
 from cli.hints import TRAIN_SCRIPTS  # noqa: E402
 from cli.train import check_writable, config_from_args  # noqa: E402
 from es import files  # noqa: E402
-from experiments.paper import latest_run  # noqa: E402
+from experiments.paper_runs import latest_run  # noqa: E402
 from settings import SEED_RANGE  # noqa: E402
 
 SET_BY_LAUNCHER = ("seed", "threads", "resume")

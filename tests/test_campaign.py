@@ -20,7 +20,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import experiments.paper as paper_script
 from es.runfolder import read_checkpoint
+from experiments import paper_campaign, paper_runs
 from experiments.campaign import prune
 from report.machine import cpu_model
 
@@ -233,13 +235,11 @@ def test_prune_keeps_what_continuing_and_evaluating_need(tmp_path):
 def test_the_campaign_runs_its_entries_in_order_until_each_is_evaluated(tmp_path, monkeypatch, capsys):
     """``paper.py campaign --budget``: each entry of the campaign file continued until complete and evaluated,
     then the next; a second call finds nothing left to do."""
-    import experiments.paper as paper_script
-
     entries = tmp_path / "campaign.toml"
     small = "--popsize 4 --generations 2 --episodes 1 --threads 2"
     entries.write_text(f'runs = ["carracing hebbian --seed 1 {small}", "carracing static --seed 1 {small}"]\n')
-    monkeypatch.setattr(paper_script, "CAMPAIGN", entries)
-    monkeypatch.setattr(paper_script, "RESULTS", tmp_path / "results")
+    monkeypatch.setattr(paper_runs, "CAMPAIGN", entries)
+    monkeypatch.setattr(paper_runs, "RESULTS", tmp_path / "results")
     monkeypatch.setattr(sys, "executable", sys.executable)
     monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
     assert paper_script.main(["campaign", "--budget", "10"]) == 0
@@ -273,12 +273,10 @@ def test_the_campaign_takes_only_its_budget_and_threads():
 
 
 def test_the_status_says_how_far_each_run_got(tmp_path, monkeypatch, capsys):
-    import experiments.paper as paper_script
-
     entries = tmp_path / "campaign.toml"
     entries.write_text('runs = ["carracing static --seed 1 --popsize 4 --generations 3", "ant static --seed 1"]\n')
-    monkeypatch.setattr(paper_script, "CAMPAIGN", entries)
-    monkeypatch.setattr(paper_script, "RESULTS", tmp_path / "results")
+    monkeypatch.setattr(paper_runs, "CAMPAIGN", entries)
+    monkeypatch.setattr(paper_runs, "RESULTS", tmp_path / "results")
     chunk = paper(*("carracing", "static", "--popsize", "4", "--generations", "3", "--episodes", "1"),
                   folder=tmp_path / "results" / "carracing_static_seed1", budget=10)
     assert chunk.returncode == 0, chunk.stderr[-2000:]
@@ -318,12 +316,10 @@ def test_a_chunk_gives_its_session_the_campaigns_niceness():
 
 def test_the_status_of_a_run_not_yet_complete_says_how_long_the_rest_takes(tmp_path, monkeypatch, capsys):
     """A chunk stopped early: the status gives the time of the remaining generations at the last ten's pace."""
-    import experiments.paper as paper_script
-
     entries = tmp_path / "campaign.toml"
     entries.write_text('runs = ["carracing hebbian --seed 1 --popsize 4 --episodes 1 --generations 30"]\n')
-    monkeypatch.setattr(paper_script, "CAMPAIGN", entries)
-    monkeypatch.setattr(paper_script, "RESULTS", tmp_path / "results")
+    monkeypatch.setattr(paper_runs, "CAMPAIGN", entries)
+    monkeypatch.setattr(paper_runs, "RESULTS", tmp_path / "results")
     folder = tmp_path / "results" / "carracing_hebbian_seed1"
     chunk = start(*SMALL, "--generations", "30", folder=folder)
     wait_for_generations(folder, 2)
@@ -390,7 +386,6 @@ def test_the_status_projects_each_remaining_run_from_the_completed_runs_of_its_k
     took for the generations it has left: their mean, the fastest and the slowest; on 16 workers times the ratio of
     the car_racing record's projections, and no figure where no record projects the kind; the campaign's remaining
     runs added up, in the status and on the progress page."""
-    import experiments.paper as paper_script
     from benchmarks import record as records
     from experiments import cost
 
@@ -398,8 +393,8 @@ def test_the_status_projects_each_remaining_run_from_the_completed_runs_of_its_k
     entries = tmp_path / "campaign.toml"
     entries.write_text("runs = [" + ", ".join(f'"carracing hebbian --seed {seed} {small}"' for seed in (1, 2, 3, 4))
                        + f', "carracing static --seed 1 {small}"]\n')
-    monkeypatch.setattr(paper_script, "CAMPAIGN", entries)
-    monkeypatch.setattr(paper_script, "RESULTS", tmp_path / "results")
+    monkeypatch.setattr(paper_runs, "CAMPAIGN", entries)
+    monkeypatch.setattr(paper_runs, "RESULTS", tmp_path / "results")
     results = tmp_path / "results"
     for seed in (1, 2):  # complete: trained as a chunk would, the evaluation left out (the projection reads none)
         command = ["train_hebb.py", "--config", "experiments/paper/carracing_hebbian.toml", "--folder",
@@ -452,7 +447,7 @@ def test_the_status_projects_each_remaining_run_from_the_completed_runs_of_its_k
         f"(2 runs): {on_16_added}, their projection times {factor:.3g}, the ratio of the projections on 16 workers "
         f"and on 2 in the benchmark's record {path.relative_to(ROOT)} ({cost.SCALING[('carracing', 'hebbian')].how}).")
 
-    paper_script.write_pages(results, "carracing")  # what a chunk writes at its end
+    paper_campaign.write_pages(results, "carracing")  # what a chunk writes at its end
     assert capsys.readouterr().out.startswith(f"campaign: wrote {results / 'progress.md'}")
     page = (results / "progress.md").read_text()
     assert f"| {estimate(left)}, from {group} seeds 1, 2 |" in page
@@ -475,7 +470,7 @@ def test_a_generations_step_limit_is_its_episodes_each_to_its_time_limit(monkeyp
     the centre's evaluation share, each episode to --max_episode_steps or else its registered limit."""
     import gymnasium as gym
 
-    from experiments.campaign import generation_step_limit
+    from experiments.progress import generation_step_limit
 
     def config(env_ids, cap=None, **es):
         return {"env": {"env_ids": env_ids, "max_episode_steps": cap},
@@ -504,13 +499,11 @@ def test_a_generations_step_limit_is_its_episodes_each_to_its_time_limit(monkeyp
 def test_a_chunks_pages_name_a_run_they_cannot_read_and_end_the_chunk_cleanly(tmp_path, capsys):
     """The progress page and the curves are written after the chunk's run is saved: a run folder beside it
     whose checkpoint cannot be read is named in one line, and nothing is raised, nothing written half."""
-    import experiments.paper as paper_script
-
     broken = tmp_path / "carracing_static_seed1" / "20260101-000000_CarRacing-v0_seed1"
     broken.mkdir(parents=True)
     (broken / "checkpoint.npz").write_bytes(b"not a checkpoint")
     (broken / "config.json").write_text('{"run": {"generations": 300}}')
-    paper_script.write_pages(tmp_path, "carracing")
+    paper_campaign.write_pages(tmp_path, "carracing")
     line = capsys.readouterr().out.strip()
     assert line.startswith(f"campaign: the progress page or the curves in {tmp_path} could not be written: "
                            f"RunFolderError: cannot resume from {broken / 'checkpoint.npz'}: not a readable checkpoint")
@@ -521,12 +514,10 @@ NOT_STARTED = "ant static seed 1: not started; no completed run of ant static to
 
 
 def test_the_status_names_a_run_it_cannot_read_and_goes_on(tmp_path, monkeypatch, capsys):
-    import experiments.paper as paper_script
-
     entries = tmp_path / "campaign.toml"
     entries.write_text('runs = ["carracing static --seed 1", "ant static --seed 1"]\n')
-    monkeypatch.setattr(paper_script, "CAMPAIGN", entries)
-    monkeypatch.setattr(paper_script, "RESULTS", tmp_path / "results")
+    monkeypatch.setattr(paper_runs, "CAMPAIGN", entries)
+    monkeypatch.setattr(paper_runs, "RESULTS", tmp_path / "results")
     broken = tmp_path / "results" / "carracing_static_seed1" / "20260101-000000_CarRacing-v0_seed1"
     broken.mkdir(parents=True)
     (broken / "checkpoint.npz").write_bytes(b"not a checkpoint")
@@ -551,13 +542,11 @@ def test_the_status_names_a_run_it_cannot_read_and_goes_on(tmp_path, monkeypatch
 ])
 @pytest.mark.parametrize("argv", [["campaign", "--status"], ["campaign", "--budget", "10"]])
 def test_a_broken_campaign_file_is_named_in_one_line(tmp_path, monkeypatch, capsys, text, problem, argv):
-    import experiments.paper as paper_script
-
     entries = tmp_path / "campaign.toml"
     if text is not None:
         entries.write_text(text)
-    monkeypatch.setattr(paper_script, "CAMPAIGN", entries)
-    monkeypatch.setattr(paper_script, "RESULTS", tmp_path / "results")
+    monkeypatch.setattr(paper_runs, "CAMPAIGN", entries)
+    monkeypatch.setattr(paper_runs, "RESULTS", tmp_path / "results")
     assert paper_script.main(argv) == 2
     captured = capsys.readouterr()
     (line,) = captured.err.strip().splitlines()
@@ -577,12 +566,10 @@ def test_a_broken_campaign_file_is_named_in_one_line(tmp_path, monkeypatch, caps
 ])
 def test_the_status_and_a_chunks_pages_name_a_config_json_of_the_wrong_types(tmp_path, monkeypatch, capsys, config,
                                                                              problem):
-    import experiments.paper as paper_script
-
     entries = tmp_path / "campaign.toml"
     entries.write_text('runs = ["carracing static --seed 1", "ant static --seed 1"]\n')
-    monkeypatch.setattr(paper_script, "CAMPAIGN", entries)
-    monkeypatch.setattr(paper_script, "RESULTS", tmp_path / "results")
+    monkeypatch.setattr(paper_runs, "CAMPAIGN", entries)
+    monkeypatch.setattr(paper_runs, "RESULTS", tmp_path / "results")
     broken = tmp_path / "results" / "carracing_static_seed1" / "20260101-000000_CarRacing-v0_seed1"
     broken.mkdir(parents=True)
     (broken / "checkpoint.npz").write_bytes(b"not read: its config.json is read first")
@@ -592,7 +579,7 @@ def test_the_status_and_a_chunks_pages_name_a_config_json_of_the_wrong_types(tmp
     assert captured.out.strip().splitlines()[0] == NOT_STARTED
     assert captured.err.strip() == (f"paper.py: error: carracing static seed 1: {broken} cannot be read (ValueError: "
                                     f"{broken}/{problem})")
-    paper_script.write_pages(tmp_path / "results", "carracing")  # what a chunk writes at its end
+    paper_campaign.write_pages(tmp_path / "results", "carracing")  # what a chunk writes at its end
     assert capsys.readouterr().out.strip() == (f"campaign: the progress page or the curves in {tmp_path / 'results'} "
                                                f"could not be written: ValueError: {broken}/{problem}")
     assert sorted(path.name for path in (tmp_path / "results").iterdir()) == ["carracing_static_seed1"]

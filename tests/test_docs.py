@@ -729,7 +729,7 @@ def test_a_campaign_result_not_yet_evaluated_is_pending_and_a_late_page_is_behin
 def test_the_campaigns_remaining_runs_are_rendered_and_a_later_state_is_behind(evaluated_runs):
     """``<!-- remaining -->`` holds the campaign's remaining runs, projected from the runs' files (experiments/cost.py);
     the runs move on at every chunk, so a check leaves a page written before as it is, and names it."""
-    from experiments.paper import campaign_entries
+    from experiments.paper_args import campaign_entries
 
     page = ROOT / "experiments" / "README.md"
     written = "<!-- remaining -->old<!-- end remaining -->"

@@ -269,7 +269,7 @@ def test_paper_report_of_real_carracing_runs(tmp_path, rliable):
     """experiments/paper.py carracing report over runs that paper.py itself trained and evaluated (small ones):
     the experiment file's CarRacing-v0 is the evaluation's CarRacing-v3, and each kind's mean is the mean of its
     runs' evaluation means."""
-    import experiments.paper as paper_script
+    from experiments import paper_campaign
 
     scores = {}
     for kind in ("static", "hebbian"):
@@ -282,7 +282,7 @@ def test_paper_report_of_real_carracing_runs(tmp_path, rliable):
             (written,) = files.read_json(evaluation)["environments"]
             scores.setdefault(kind, []).append(float(np.mean(written["returns"])))
         # a chunk's end writes the report once both kinds have an evaluated run, not before
-        paper_script.write_pages(tmp_path, "carracing")
+        paper_campaign.write_pages(tmp_path, "carracing")
         assert (tmp_path / "carracing_report").exists() == (kind == "hebbian")
     # the runs named relative to the folder of runs, so that the report reads the same from any clone
     with open(tmp_path / "carracing_report" / "CarRacing-v3" / "scores.csv", newline="") as handle:

@@ -44,7 +44,7 @@ from envs import ProblemSpec  # noqa: E402
 from es.files import atomic_write_text  # noqa: E402
 from es.runfolder import named_file  # noqa: E402
 from es.strategies import make_strategy  # noqa: E402
-from experiments.paper import latest_run, run  # noqa: E402
+from experiments.paper_runs import latest_run, run  # noqa: E402
 
 DEFAULT_ENV = "experiments.reservoir_front.partial:CartPoleNoVelocity-v1"
 # the reservoir ER-MRL evolved for PPO on CartPole without velocities (docs/reservoirs.md:
