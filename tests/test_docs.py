@@ -53,6 +53,7 @@ PRELOAD = ("torch", "numba", "scipy", "gymnasium", "pygame", "Box2D", "mujoco", 
 spec = importlib.util.spec_from_file_location("docs_generate", ROOT / "docs" / "generate.py")
 generate = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(generate)
+number = generate.records_files.number
 
 # extra -> (modules it installs, how to tell a command needs it)
 EXTRAS = {
@@ -204,7 +205,7 @@ def captured_parser(script: str) -> argparse.ArgumentParser:
 
 def parser_of(script: str) -> argparse.ArgumentParser:
     if "/" not in script or script.startswith("scripts/"):
-        return generate.parser_of(script)
+        return generate.parsers.parser_of(script)
     return captured_parser(script)
 
 
@@ -520,16 +521,16 @@ def test_readme_begins_with_the_two_commands():
 
 def test_flag_tables_match_the_parsers():
     """Each table between flag markers is what docs/generate.py makes from the parsers now."""
-    pages = [page for page in generate.pages() if generate.MARKER.search(page.read_text())]
+    marker = generate.pattern("flags")
+    pages = [page for page in generate.pages() if marker.search(page.read_text())]
     assert pages, "no flag table in docs/"
     for page in pages:
-        for match in generate.MARKER.finditer(page.read_text()):
-            scripts = [match["script"], *([match["other"]] if match["other"] else [])]
-            if any(needed_extra(script, []) for script in scripts):
+        for match in marker.finditer(page.read_text()):
+            script, *other = match["words"].split()  # SCRIPT [except OTHER]
+            if any(needed_extra(name, []) for name in (script, *other[1:])):
                 continue  # the reservoir scripts' parsers need their extra; CI has it
-            assert match["table"] == generate.table(match["script"], match["other"]), (
-                f"{page.relative_to(ROOT)}: the table of {match['script']} differs from its parser; "
-                "run python docs/generate.py")
+            assert match["text"] == generate.parsers.table(script, other[1] if other else None), (
+                f"{page.relative_to(ROOT)}: the table of {script} differs from its parser; run python docs/generate.py")
 
 
 def test_figures_are_their_records():
@@ -540,7 +541,8 @@ def test_figures_are_their_records():
     for page in generate.pages():
         text = page.read_text()
         try:
-            rendered = generate.render_results(generate.render_figures(text, page), page, behind=[])
+            # every marker but the flag tables (test_flag_tables_match_the_parsers, which knows the extras they need)
+            rendered = generate.render(text, page, [], [kind for kind in generate.MARKERS if kind != "flags"])
         except generate.FigureError as error:
             pytest.fail(f"{page.relative_to(ROOT)}: {error}")
         assert rendered == text, (
@@ -561,7 +563,7 @@ def test_no_speed_figure_is_typed_into_a_page():
         fenced = False
         for number, line in enumerate(page.read_text().splitlines(), 1):
             fenced ^= line.startswith("```")
-            text = re.sub(r"`[^`]*`", "", generate.FIGURE.sub("", line))
+            text = re.sub(r"`[^`]*`", "", generate.pattern("figure").sub("", line))
             typed += [f"{page.relative_to(ROOT)}:{number}: {match[0]}" for match in TYPED_SPEED.finditer(text)
                       if not fenced]
     assert not typed, "speed figures typed into the docs (render them from records: docs/development.md):\n" + (
@@ -585,11 +587,11 @@ def test_a_figure_is_rendered_from_its_record_and_checked(tmp_path):
     a_record(tmp_path, "quiet")
     page = ROOT / "docs" / "speed.md"
     text = "stepped <!-- figure:quiet env_step -->10×<!-- end figure --> faster"
-    rendered = generate.render_figures(text, page, tmp_path)
+    rendered = generate.render(text, page, results=tmp_path)
     link = os.path.relpath(tmp_path / "quiet-20260101T000000Z.json", page.parent)
     assert rendered == f"stepped <!-- figure:quiet env_step -->[9.20× (9.00–9.40), AMD EPYC, 2 cores]({link})" \
                        "<!-- end figure --> faster"
-    assert generate.render_figures(rendered, page, tmp_path) == rendered  # the check the pages pass
+    assert generate.render(rendered, page, results=tmp_path) == rendered  # the check the pages pass
 
 
 def test_a_figure_is_its_commands_newest_record_taken_on_a_quiet_machine(tmp_path):
@@ -600,7 +602,7 @@ def test_a_figure_is_its_commands_newest_record_taken_on_a_quiet_machine(tmp_pat
     a_record(tmp_path, "quiet", taken="20260301T000000Z", first=7.0)
     a_record(tmp_path, "quiet", taken="20260401T000000Z", first=5.0, loaded=True)
     a_record(tmp_path, "quiet-scaling", taken="20260501T000000Z", first=3.0)
-    rendered = generate.render_figures("<!-- figure:quiet env_step --><!-- end figure -->", page, tmp_path)
+    rendered = generate.render("<!-- figure:quiet env_step --><!-- end figure -->", page, results=tmp_path)
     assert "[7.20× (7.00–7.40), AMD EPYC, 2 cores](" in rendered and "quiet-20260301T000000Z.json)" in rendered
 
 
@@ -613,7 +615,7 @@ def test_a_figure_that_cannot_be_published_is_refused(tmp_path, kind, message):
     measure = "reset" if kind == "measure" else "env_step"
     text = f"<!-- figure:{kind} {measure} --><!-- end figure -->"
     with pytest.raises(generate.FigureError, match=message):
-        generate.render_figures(text, ROOT / "README.md", tmp_path)
+        generate.render(text, ROOT / "README.md", results=tmp_path)
 
 
 def a_table_record(folder: Path, name: str, loaded: bool = False) -> Path:
@@ -626,20 +628,31 @@ def a_table_record(folder: Path, name: str, loaded: bool = False) -> Path:
     return path
 
 
+@pytest.mark.parametrize(("text", "message"), [
+    ("<!-- figure:car_racing --><!-- end figure -->", "it takes figure:RECORD MEASURE"),
+    ("<!-- flags:train_hebb.py but train_static.py -->\n<!-- end flags -->", "it takes flags:SCRIPT [except OTHER]"),
+    ("<!-- remaining:campaign --><!-- end remaining -->", "it takes no words"),
+])
+def test_a_marker_written_wrong_is_refused_naming_what_it_takes(text, message):
+    """MARKERS, the one table of marker kinds, says what words each takes; a marker with others is refused."""
+    with pytest.raises(generate.FigureError, match=re.escape(message)):
+        generate.render(text, ROOT / "README.md")
+
+
 def test_a_records_table_is_rendered_with_its_intervals_and_machine(tmp_path):
     a_table_record(tmp_path, "solve")
     page = ROOT / "docs" / "strategies.md"
     text = "<!-- table:solve results -->\nold\n<!-- end table -->"
     link = os.path.relpath(tmp_path / "solve-20260101T000000Z.json", page.parent)
-    assert generate.render_figures(text, page, tmp_path) == (
+    assert generate.render(text, page, results=tmp_path) == (
         "<!-- table:solve results -->\n| row | population | budget | σ | steps | P |\n|---|---|---|---|---|---|\n"
         "| snes | 64 | 1,000,000 | 0.024 | 20,513 [15,870, 26,011] | 0.62 [0.40, 0.85] |\n\n"
         f"[AMD EPYC, 2 cores, 2026-01-01]({link})\n<!-- end table -->")
     a_table_record(tmp_path, "busy", loaded=True)
     with pytest.raises(generate.FigureError, match="loaded"):
-        generate.render_figures("<!-- table:busy results -->\n<!-- end table -->", page, tmp_path)
+        generate.render("<!-- table:busy results -->\n<!-- end table -->", page, results=tmp_path)
     with pytest.raises(generate.FigureError, match="no table 'settings'"):
-        generate.render_figures("<!-- table:solve settings -->\n<!-- end table -->", page, tmp_path)
+        generate.render("<!-- table:solve settings -->\n<!-- end table -->", page, results=tmp_path)
 
 
 @pytest.fixture(scope="module")
@@ -668,23 +681,23 @@ def test_a_campaign_result_is_rendered_from_its_evaluation(evaluated_runs):
     evaluation = os.path.relpath(run / "evaluation.json", page.parent)
     text = ("| <!-- result:carracing_hebbian_seed1 -->old<!-- end result --> | "
             "<!-- result:carracing_hebbian_seed1 CarRacing-v3 -->old<!-- end result --> |")
-    rendered = generate.render_results(text, page, evaluated_runs)
+    rendered = generate.render(text, page, runs=evaluated_runs)
     weights = os.path.relpath(run, page.parent)
-    cell = (f"**{generate.number(mean)} ± {generate.number(std)}** ([2 episodes on held-out seeds]({evaluation}), "
-            f"generation 2 after {generate.number(hours)} h of training on {cpu_model()}, 1 worker, "
+    cell = (f"**{number(mean)} ± {number(std)}** ([2 episodes on held-out seeds]({evaluation}), "
+            f"generation 2 after {number(hours)} h of training on {cpu_model()}, 1 worker, "
             f"[weights]({weights}))")
     assert rendered == (f"| <!-- result:carracing_hebbian_seed1 -->{cell}<!-- end result --> | "
                         f"<!-- result:carracing_hebbian_seed1 CarRacing-v3 -->{cell}<!-- end result --> |")
-    assert generate.render_results(rendered, page, evaluated_runs) == rendered  # the check the pages pass
+    assert generate.render(rendered, page, runs=evaluated_runs) == rendered  # the check the pages pass
     # the spread, for 2 episodes written from the definition: numpy's linear percentile is lo + p * (hi - lo)
     lo, hi = sorted(returns)
     floor = 0.75 * mean
     below = sum(value < floor for value in returns)
-    spread = (f"median {generate.number(lo + 0.5 * (hi - lo))}, quartiles {generate.number(lo + 0.25 * (hi - lo))}–"
-              f"{generate.number(lo + 0.75 * (hi - lo))}, lowest {generate.number(lo)}, highest {generate.number(hi)}; "
-              f"{below} of 2 episodes below three quarters of the mean ({generate.number(floor)})")
+    spread = (f"median {number(lo + 0.5 * (hi - lo))}, quartiles {number(lo + 0.25 * (hi - lo))}–"
+              f"{number(lo + 0.75 * (hi - lo))}, lowest {number(lo)}, highest {number(hi)}; "
+              f"{below} of 2 episodes below three quarters of the mean ({number(floor)})")
     marker = "<!-- spread:carracing_hebbian_seed1 CarRacing-v3 -->{}<!-- end spread -->"
-    assert generate.render_results(marker.format("old"), page, evaluated_runs) == marker.format(spread)
+    assert generate.render(marker.format("old"), page, runs=evaluated_runs) == marker.format(spread)
     # the best centre: the first generation of metrics.csv with the highest centre return, evaluated on the same seeds
     with open(run / "metrics.csv", newline="") as handle:
         top = max(csv.DictReader(handle), key=lambda row: float(row["center_return"]))
@@ -693,37 +706,34 @@ def test_a_campaign_result_is_rendered_from_its_evaluation(evaluated_runs):
                                "training_return": float(top["center_return"])}
     (best_entry,) = best["environments"]
     assert best_entry["seeds"] == entry["seeds"]
-    best_cell = (f"**{generate.number(best_entry['mean'])} ± {generate.number(best_entry['std'])}** ([2 episodes on "
+    best_cell = (f"**{number(best_entry['mean'])} ± {number(best_entry['std'])}** ([2 episodes on "
                  f"held-out seeds]({os.path.relpath(run / 'evaluation_best.json', page.parent)}), the best centre: "
-                 f"training return {generate.number(float(top['center_return']))} at generation {top['generation']})")
+                 f"training return {number(float(top['center_return']))} at generation {top['generation']})")
     marker = "<!-- best:carracing_hebbian_seed1 CarRacing-v3 -->{}<!-- end best -->"
-    assert generate.render_results(marker.format("old"), page, evaluated_runs) == marker.format(best_cell)
-    strip = generate.render_results("<!-- frames:carracing_hebbian_seed1 --><!-- end frames -->", page, evaluated_runs)
+    assert generate.render(marker.format("old"), page, runs=evaluated_runs) == marker.format(best_cell)
+    strip = generate.render("<!-- frames:carracing_hebbian_seed1 --><!-- end frames -->", page, runs=evaluated_runs)
     assert f"]({os.path.relpath(run / 'frames.png', page.parent)})<!-- end frames -->" in strip
     with pytest.raises(generate.FigureError, match=r"no environment CarRacing-v2 in .* \(CarRacing-v3\)"):
-        generate.render_results("<!-- result:carracing_hebbian_seed1 CarRacing-v2 --><!-- end result -->", page,
-                                evaluated_runs)
+        generate.render("<!-- result:carracing_hebbian_seed1 CarRacing-v2 --><!-- end result -->", page,
+                        runs=evaluated_runs)
 
 
 def test_a_campaign_result_not_yet_evaluated_is_pending_and_a_late_page_is_behind(evaluated_runs, tmp_path):
     page = ROOT / "README.md"
-    pending = f"<!-- result:carracing_static_seed1 -->{generate.PENDING}<!-- end result -->"
-    assert generate.render_results("<!-- result:carracing_static_seed1 -->x<!-- end result -->", page,
-                                   evaluated_runs) == pending  # no such run
-    assert generate.render_results("<!-- spread:carracing_static_seed1 -->x<!-- end spread -->", page,
-                                   evaluated_runs) == pending.replace("result", "spread")
-    assert generate.render_results("<!-- best:carracing_static_seed1 -->x<!-- end best -->", page,
-                                   evaluated_runs) == pending.replace("result", "best")
+    pending = f"<!-- result:carracing_static_seed1 -->{generate.runs_files.PENDING}<!-- end result -->"
+    for kind in ("result", "spread", "best"):  # no such run
+        marker = f"<!-- {kind}:carracing_static_seed1 -->x<!-- end {kind} -->"
+        assert generate.render(marker, page, runs=evaluated_runs) == pending.replace("result", kind)
     shutil.copytree(evaluated_runs / "carracing_hebbian_seed1", tmp_path / "carracing_hebbian_seed1")
     (run,) = [path for path in (tmp_path / "carracing_hebbian_seed1").iterdir() if path.is_dir()]
     (run / "evaluation.json").rename(run / "later.json")  # trained, not yet evaluated
-    written = f"<!-- result:carracing_hebbian_seed1 -->{generate.PENDING}<!-- end result -->"
-    assert generate.render_results(written, page, tmp_path) == written
+    written = f"<!-- result:carracing_hebbian_seed1 -->{generate.runs_files.PENDING}<!-- end result -->"
+    assert generate.render(written, page, runs=tmp_path) == written
     (run / "later.json").rename(run / "evaluation.json")  # evaluated since the page was written
     behind = []
-    assert generate.render_results(written, page, tmp_path, behind) == written  # a check leaves it, and says so
+    assert generate.render(written, page, behind, runs=tmp_path) == written  # a check leaves it, and says so
     assert behind == ["carracing_hebbian_seed1"]
-    assert generate.PENDING not in generate.render_results(written, page, tmp_path)  # a rewrite fills it in
+    assert generate.runs_files.PENDING not in generate.render(written, page, runs=tmp_path)  # a rewrite fills it in
 
 
 def test_the_campaigns_remaining_runs_are_rendered_and_a_later_state_is_behind(evaluated_runs):
@@ -733,17 +743,17 @@ def test_the_campaigns_remaining_runs_are_rendered_and_a_later_state_is_behind(e
 
     page = ROOT / "experiments" / "README.md"
     written = "<!-- remaining -->old<!-- end remaining -->"
-    rendered = generate.render_results(written, page, evaluated_runs)
+    rendered = generate.render(written, page, runs=evaluated_runs)
     # the small run in evaluated_runs is seed 1 of CarRacing Hebbian, 2 of the campaign's 300 generations: no run is
     # complete, so none of the campaign's runs has a completed run of its kind to be projected from
     assert rendered.startswith(f"<!-- remaining -->{len(campaign_entries())} runs to train: not projected, no "
                                "completed run of their kind yet: carracing hebbian seed 1, carracing static seed 1, ")
     assert rendered.endswith(".<!-- end remaining -->")
     behind: list[str] = []
-    assert generate.render_results(written, page, evaluated_runs, behind) == written
+    assert generate.render(written, page, behind, runs=evaluated_runs) == written
     assert behind == ["the campaign's remaining runs"]
     behind = []
-    assert generate.render_results(rendered, page, evaluated_runs, behind) == rendered and behind == []
+    assert generate.render(rendered, page, behind, runs=evaluated_runs) == rendered and behind == []
 
 
 def test_the_campaigns_report_is_rendered_once_every_evaluated_run_is_in(tmp_path):
@@ -755,14 +765,14 @@ def test_the_campaigns_report_is_rendered_once_every_evaluated_run_is_in(tmp_pat
 
     from report import stats
 
-    assert generate.campaign_folders("carracing") == {
+    assert generate.runs_files.campaign_folders("carracing") == {
         kind: {f"carracing_{kind}_seed{seed}" for seed in (1, 2, 3, 4, 5)} for kind in ("hebbian", "static")}
     page = ROOT / "README.md"
     folder = tmp_path / "carracing_report" / "CarRacing-v3"
     planned = {kind: {f"carracing_{kind}_seed{seed}" for seed in (1, 2, 3)} for kind in ("static", "hebbian")}
 
     def rendered() -> str:
-        return generate.report("carracing", "CarRacing-v3", page, tmp_path, planned)
+        return generate.runs_files.report("carracing", "CarRacing-v3", page, tmp_path, planned)
 
     def evaluate(*names: str) -> None:
         for name in names:
@@ -771,7 +781,7 @@ def test_the_campaigns_report_is_rendered_once_every_evaluated_run_is_in(tmp_pat
             (run / "checkpoint.npz").write_bytes(b"")  # (a run folder is one with a checkpoint)
             (run / "evaluation.json").write_text("{}")
 
-    assert rendered() == generate.REPORT_PENDING  # no report yet
+    assert rendered() == generate.runs_files.REPORT_PENDING  # no report yet
     folder.mkdir(parents=True)
     summaries = [stats.Summary("static", 2, 840.25, 830.5, 850.0, 841.0, 829.0, 852.75, 840.25),
                  stats.Summary("hebbian", 2, 866.75, 860.0, 873.5, 866.75, 860.0, 873.5, 866.75)]
@@ -786,9 +796,9 @@ def test_the_campaigns_report_is_rendered_once_every_evaluated_run_is_in(tmp_pat
                                                             "score": 1.0} for name in folders]))
 
     scores("carracing_static_seed1", "carracing_hebbian_seed1", "carracing_hebbian_seed2")
-    assert rendered() == generate.REPORT_PENDING  # no run evaluated yet
+    assert rendered() == generate.runs_files.REPORT_PENDING  # no run evaluated yet
     evaluate("carracing_static_seed1", "carracing_static_seed2", "carracing_hebbian_seed1", "carracing_hebbian_seed2")
-    assert rendered() == generate.REPORT_PENDING  # static seed 2 is evaluated, but not in the report yet
+    assert rendered() == generate.runs_files.REPORT_PENDING  # static seed 2 is evaluated, but not in the report yet
     scores("carracing_static_seed1", "carracing_static_seed2", "carracing_hebbian_seed1", "carracing_hebbian_seed2")
     summary = os.path.relpath(folder / "summary.md", page.parent)
     assert rendered() == ("over 2 runs of each kind (95 % bootstrap intervals): static IQM **840** [830, 850], mean "
@@ -796,10 +806,10 @@ def test_the_campaigns_report_is_rendered_once_every_evaluated_run_is_in(tmp_pat
                           f"P(Hebbian > static) **0.75** [0.25, 1.00] ([the report]({summary})); 2 more runs of the "
                           "campaign to come")
     evaluate("carracing_static_seed3")
-    assert rendered() == generate.REPORT_PENDING  # evaluated since the report was written
-    written = f"<!-- report:carracing CarRacing-v3 -->{generate.REPORT_PENDING}<!-- end report -->"
+    assert rendered() == generate.runs_files.REPORT_PENDING  # evaluated since the report was written
+    written = f"<!-- report:carracing CarRacing-v3 -->{generate.runs_files.REPORT_PENDING}<!-- end report -->"
     behind = []  # the campaign's own plan's runs are not in tmp_path: still pending, not behind
-    assert generate.render_results(written, page, tmp_path, behind) == written and behind == []
+    assert generate.render(written, page, behind, runs=tmp_path) == written and behind == []
     # one run per kind, every planned one in: no interval (every resample is that run), as the report itself says
     planned = {kind: {f"carracing_{kind}_seed1"} for kind in ("static", "hebbian")}
     (folder / "summary.csv").write_text(stats.csv_text([asdict(replace(summary, runs=1)) for summary in summaries]))

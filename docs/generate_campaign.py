@@ -1,0 +1,222 @@
+"""The docs' campaign results, from the campaign's run folders (``results/paper/``; docs/generate.py).
+
+A campaign run's evaluation (``result``, ``headline``), how its returns spread (``spread``), its best centre's
+evaluation (``best``), its frames (``frames``), an experiment's report over its seeds (``report``) and the
+campaign's remaining runs with what they will cost (``remaining``), each read from the runs' own files. Until a
+run is evaluated (or every run a report needs is in) the marker holds its pending text.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+from pathlib import Path
+
+import numpy as np
+from generate_records import FigureError, number
+
+from cli.errors import USER_ERRORS
+from es.files import read_json
+from experiments import campaign, cost
+from experiments.paper_args import campaign_entries
+from experiments.paper_report import report_folder
+from experiments.paper_runs import HELD_OUT_SEED, latest_run, load_experiment, run_name
+from experiments.paper_status import campaign_plan
+from experiments.progress import measure
+
+ROOT = Path(__file__).resolve().parent.parent
+RUNS = ROOT / "results" / "paper"  # the campaign's run folders
+
+PENDING = "not yet: training in the campaign"
+
+FRAMES_PENDING = "(the agent's frames, once its run is evaluated)"
+
+REPORT_PENDING = "not yet: the campaign's seeds are still training"
+
+KIND_NAMES = {"hebbian": "Hebbian", "static": "static"}
+
+
+def evaluated(name: str, runs: Path, file: str = campaign.EVALUATION) -> Path | None:
+    """The newest run folder of ``runs/name`` (the one experiments/paper.py continues), if it has been evaluated
+    (its ``file``: the final centre's evaluation, or the best centre's)."""
+    run = latest_run(runs / name)
+    return run if run is not None and (run / file).is_file() else None
+
+
+def link(path: Path, page: Path) -> str:
+    return Path(os.path.relpath(path, page.parent)).as_posix()
+
+
+def evaluation_of(name: str, environment: str | None, runs: Path,
+                  file: str = campaign.EVALUATION) -> tuple[Path, dict, dict] | None:
+    """The newest run of ``runs/name``, its evaluation ``file`` and the entry of ``environment`` there (the only
+    one, where None); None until the run is evaluated."""
+    run = evaluated(name, runs, file)
+    if run is None:
+        return None
+    try:
+        evaluation = read_json(run / file)
+        entries = evaluation["environments"]
+        found = ", ".join(entry["environment"] for entry in entries)
+    except (KeyError, TypeError, ValueError, OSError, *USER_ERRORS) as error:
+        raise FigureError(f"{name}: {run} is not a run this tool evaluated ({type(error).__name__}: {error})") from None
+    chosen = [entry for entry in entries if environment in (None, entry["environment"])]
+    if len(chosen) != 1:
+        raise FigureError(f"{name}: {'no' if not chosen else 'several'} environment{'' if environment else 's'} "
+                          f"{environment or ''} in {run / file} ({found}); name one in the marker")
+    return run, evaluation, chosen[0]
+
+
+def scored(run: Path, file: str, evaluation: dict, entry: dict, page: Path) -> str:
+    """"**903 ± 45.1** ([100 episodes on held-out seeds](link)": one environment's returns in an evaluation
+    ``file`` of ``run``, linked; a KeyError or TypeError where the file is not one."""
+    seeds = "on held-out seeds" if evaluation["seed"] >= HELD_OUT_SEED else f"from seed {evaluation['seed']}"
+    return (f"**{number(entry['mean'])} ± {number(entry['std'])}** ([{entry['episodes']} episodes {seeds}]"
+            f"({link(run / file, page)})")
+
+
+def result(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
+    """One campaign run's evaluation: "**903 ± 45.1** (100 episodes on held-out seeds, generation 300 after 7.31 h
+    of training on AMD EPYC 7B13, 2 workers, weights)"; the hours are the sum of metrics.csv's ``seconds``, the
+    machines config.json's record."""
+    found = evaluation_of(name, environment, runs)
+    if found is None:
+        return PENDING
+    run, evaluation, entry = found
+    try:
+        headline = scored(run, campaign.EVALUATION, evaluation, entry, page)
+        progress = measure(run)
+    except (KeyError, TypeError, ValueError, OSError, *USER_ERRORS) as error:
+        raise FigureError(f"{name}: {run} is not a run this tool evaluated ({type(error).__name__}: {error})") from None
+    return (f"{headline}, generation {progress.done} after {number(progress.hours)} h of training"
+            + (f" on {progress.machines}" if progress.machines else "") + f", [weights]({link(run, page)}))")
+
+
+def headline(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
+    """One campaign run's evaluation in a few characters, for a table of results: "[**867 ± 130**](evaluation.json)"."""
+    found = evaluation_of(name, environment, runs)
+    if found is None:
+        return PENDING
+    run, _, entry = found
+    try:
+        return f"[**{number(entry['mean'])} ± {number(entry['std'])}**]({link(run / campaign.EVALUATION, page)})"
+    except (KeyError, TypeError, ValueError) as error:
+        raise FigureError(f"{name}: {run / campaign.EVALUATION} holds no mean and spread "
+                          f"({type(error).__name__}: {error})") from None
+
+
+def best(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
+    """One campaign run's best centre evaluated on the final centre's episodes: "**897 ± 61.2** (100 episodes on
+    held-out seeds, the best centre: training return 921.5 at generation 248)"."""
+    found = evaluation_of(name, environment, runs, campaign.BEST_EVALUATION)
+    if found is None:
+        return PENDING
+    run, evaluation, entry = found
+    try:
+        headline = scored(run, campaign.BEST_EVALUATION, evaluation, entry, page)
+        centre = evaluation["weights"]
+        where = f" at generation {centre['generation']}" if centre.get("generation") is not None else ""
+        return f"{headline}, the best centre: training return {number(centre['training_return'])}{where})"
+    except (KeyError, TypeError, ValueError) as error:
+        raise FigureError(f"{name}: {run / campaign.BEST_EVALUATION} is not a best centre's evaluation "
+                          f"({type(error).__name__}: {error})") from None
+
+
+def spread(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
+    """How one campaign run's evaluation returns spread: "median 905, quartiles 888–915, lowest 106, highest 936;
+    4 of 100 episodes below three quarters of the mean (650)" (numpy's percentiles, linear)."""
+    found = evaluation_of(name, environment, runs)
+    if found is None:
+        return PENDING
+    run, _, entry = found
+    try:
+        returns = np.asarray(entry["returns"], dtype=np.float64)
+        low, median, high = np.percentile(returns, [25, 50, 75])
+        floor = 0.75 * returns.mean()
+    except (KeyError, TypeError, ValueError, IndexError) as error:
+        raise FigureError(f"{name}: {run / 'evaluation.json'} holds no returns ({type(error).__name__}: {error})") \
+            from None
+    return (f"median {number(median)}, quartiles {number(low)}–{number(high)}, lowest {number(returns.min())}, "
+            f"highest {number(returns.max())}; {int((returns < floor).sum())} of {returns.size} episodes below three "
+            f"quarters of the mean ({number(floor)})")
+
+
+def frames(name: str, page: Path, runs: Path = RUNS) -> str:
+    run = evaluated(name, runs)
+    if run is None or not (run / "frames.png").is_file():
+        return FRAMES_PENDING
+    return f"![{name}: every 100th frame of its first evaluation episode]({link(run / 'frames.png', page)})"
+
+
+def campaign_folders(experiment: str) -> dict[str, set[str]]:
+    """Per kind, the folders of the runs experiments/paper/campaign.toml plans for ``experiment``."""
+    planned: dict[str, set[str]] = {}
+    for entry in campaign_entries():
+        if entry.experiment == experiment:
+            planned.setdefault(entry.kind, set()).add(run_name(entry, load_experiment(entry)[1]))
+    return planned
+
+
+def read_rows(path: Path) -> list[dict]:
+    with open(path, newline="") as handle:
+        return list(csv.DictReader(handle))
+
+
+def report(experiment: str, environment: str, page: Path, runs: Path = RUNS,
+           planned: dict[str, set[str]] | None = None) -> str:
+    """The campaign's report of ``experiment`` on ``environment`` (``experiments/paper.py EXPERIMENT report``, in
+    ``runs``): each kind's IQM and mean with their 95 % bootstrap intervals, and P(Hebbian > static), linked to
+    the report, and how many of the runs the campaign plans for the experiment (``planned``: folder names per
+    kind) are still to come. Pending until each kind has an evaluated run and the report holds every evaluated
+    one, so that a page never shows a report older than the runs."""
+    folder = report_folder(runs, experiment) / environment
+    planned = campaign_folders(experiment) if planned is None else planned
+    try:
+        scores = read_rows(folder / "scores.csv")
+        summaries = read_rows(folder / "summary.csv")
+        pairs = read_rows(folder / "improvement.csv")
+        reported = {Path(row["run"]).parts[0] for row in scores}  # the runs' folders: carracing_static_seed1, ...
+    except FileNotFoundError:
+        return REPORT_PENDING
+    except (KeyError, IndexError):
+        raise FigureError(f"{experiment}: {folder / 'scores.csv'} names no runs") from None
+    done = {kind: {name for name in names if evaluated(name, runs)} for kind, names in planned.items()}
+    if not planned or not all(done.values()) or not all(names <= reported for names in done.values()):
+        return REPORT_PENDING
+    to_come = sum(len(names) for names in planned.values()) - sum(len(names) for names in done.values())
+
+    def interval(row: dict, low: str, high: str, single: bool, show=number) -> str:
+        # a group of one run has no interval: every resample is that run (report/stats.py's markdown)
+        return " (no interval: 1 run)" if single else f" [{show(float(row[low]))}, {show(float(row[high]))}]"
+
+    try:
+        counts = {row["group"]: int(row["runs"]) for row in summaries}
+        sizes = set(counts.values())
+        if not sizes:
+            raise ValueError("no group")
+        cells = [f"{KIND_NAMES.get(row['group'], row['group'])} IQM **{number(float(row['iqm']))}**"
+                 f"{interval(row, 'iqm_low', 'iqm_high', counts[row['group']] == 1)}, mean "
+                 f"**{number(float(row['mean']))}**{interval(row, 'mean_low', 'mean_high', counts[row['group']] == 1)}"
+                 for row in summaries]
+        pair = next(row for row in pairs if (row["x"], row["y"]) == ("hebbian", "static"))
+        better = (f"P(Hebbian > static) **{float(pair['probability']):.2f}**"
+                  f"{interval(pair, 'low', 'high', min(counts.values()) == 1, lambda value: f'{value:.2f}')}")
+    except (KeyError, ValueError, StopIteration) as error:
+        raise FigureError(f"{experiment}: {folder} is not a report of both kinds ({type(error).__name__}: {error})") \
+            from None
+    over = (f"{min(sizes)} run{'s' if min(sizes) > 1 else ''} of each kind" if len(sizes) == 1 else
+            "runs of " + ", ".join(f"{group}: {count}" for group, count in counts.items()))
+    over += " (95 % bootstrap intervals)" if max(sizes) > 1 else ""
+    later = f"; {to_come} more run{'s' if to_come > 1 else ''} of the campaign to come" if to_come else ""
+    return f"over {over}: {'; '.join(cells)}; {better} ([the report]" \
+           f"({link(folder / 'summary.md', page)})){later}"
+
+
+def remaining(page: Path, runs: Path = RUNS) -> str:
+    """The campaign's remaining runs and what they will cost, projected from its completed runs in ``runs``
+    (``experiments/cost.py``: on the workers those ran on, and on more where a benchmark's record projects it)."""
+    try:
+        plan = campaign_plan(runs)
+    except (KeyError, TypeError, ValueError, OSError, *USER_ERRORS) as error:
+        raise FigureError(f"the campaign's runs in {runs} cannot be read ({type(error).__name__}: {error})") from None
+    return cost.summary(cost.project([planned for _, planned in plan]), page)

@@ -1,0 +1,81 @@
+"""The docs' measured figures and tables, from the benchmarks' records (``<!-- figure:RECORD MEASURE -->``,
+``<!-- table:RECORD KEY -->``, docs/generate.py).
+
+A figure is the median of a measure in the newest record of a benchmark's command taken on a quiet machine
+(``record.newest``), its range over the rounds and the machine, linked to the record ("9.31× (8.92–9.60), AMD
+EPYC, 2 cores"); a measure of fewer than 5 rounds is refused (docs/development.md, "Benchmark discipline"). A
+table is one a benchmark wrote into its record (``Record.table``), each estimate with its interval, then the
+machine and the link to the record.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import record as records  # benchmarks/record.py, on the path docs/generate.py sets
+from generate_flags import cell
+
+UNITS = {"x": "×", "": "", "us": " µs"}  # any other unit is written after a space as it is ("ms", "h", "steps/s")
+
+
+class FigureError(ValueError):
+    """A figure that cannot be published: no such record or measure, a loaded record, too few rounds."""
+
+
+def number(value: float) -> str:
+    """Three significant digits or so: 1,005 / 17.6 / 9.31 / 0.862."""
+    size = abs(value)
+    return f"{value:,.0f}" if size >= 100 else f"{value:.1f}" if size >= 10 else f"{value:.2f}" if size >= 1 \
+        else f"{value:.3f}"
+
+
+def published(name: str, results: Path) -> tuple[Path, dict]:
+    """The newest record of the command ``name`` not taken on a loaded machine, and its path (``record.newest``);
+    FigureError where there is none."""
+    try:
+        return records.newest(name, results)
+    except ValueError as error:  # none, every one loaded, a file that is not a record
+        raise FigureError(str(error)) from None
+
+
+def figure(name: str, measure: str, page: Path, results: Path = records.RESULTS) -> str:
+    """The text of one figure: median, range and machine, linked (from ``page``) to its record."""
+    path, record = published(name, results)
+    if measure not in record["measures"]:
+        raise FigureError(f"{name}: no measure {measure!r} (it has {', '.join(record['measures'])})")
+    values = record["measures"][measure]
+    if values["rounds"] < records.MIN_ROUNDS:
+        raise FigureError(f"{name} {measure}: {values['rounds']} rounds; a figure is the median of at least "
+                          f"{records.MIN_ROUNDS}")
+    unit = UNITS.get(values["unit"], " " + values["unit"])
+    text = (f"{number(values['median'])}{unit} ({number(values['min'])}–{number(values['max'])}), {record['cpu']}, "
+            f"{record['cores']} cores")
+    return f"[{text}]({Path(os.path.relpath(path, page.parent)).as_posix()})"
+
+
+def table_cell(value) -> str:
+    """Text as it is; a count (an int) as it is, with thousands separators; any other number as ``number``
+    writes it; an estimate as "value [low, high]" (with ``digits`` decimals where it gives them: a
+    probability)."""
+    if isinstance(value, dict):
+        digits = value.get("digits")
+        shown = number if digits is None else (lambda x: f"{x:.{digits}f}")
+        return f"{shown(value['value'])} [{shown(value['low'])}, {shown(value['high'])}]"
+    if isinstance(value, int) and not isinstance(value, bool):
+        return f"{value:,}"
+    if isinstance(value, float):
+        return number(value)
+    return cell(value)
+
+
+def record_table(name: str, key: str, page: Path, results: Path = records.RESULTS) -> str:
+    """A record's table (``Record.table``) in markdown, then its machine and date, linked to the record."""
+    path, record = published(name, results)
+    table = record.get("notes", {}).get(key)
+    if not isinstance(table, dict) or {"columns", "rows"} - set(table):
+        raise FigureError(f"{name}: no table {key!r} in its notes")
+    lines = ["| " + " | ".join(map(cell, table["columns"])) + " |", "|" + "---|" * len(table["columns"])]
+    lines += ["| " + " | ".join(table_cell(value) for value in row) + " |" for row in table["rows"]]
+    link = Path(os.path.relpath(path, page.parent)).as_posix()
+    return "\n".join(lines) + f"\n\n[{record['cpu']}, {record['cores']} cores, {record['date'][:10]}]({link})\n"
