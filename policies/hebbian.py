@@ -25,11 +25,11 @@ import numpy as np
 from policies.base import Policy
 from policies.conv import ConvFeatures
 from policies.init import COEVOLVE, INIT_CHOICES, sample_weights
-from policies.kernels import hebbian_forward_update
+from policies.kernels import head_state, hebbian_step
 from policies.network import Layout, NetworkSpec, from_kernel_layout, to_kernel_layout
 from policies.plugin import EVALUATED, FileFlag, Kind
 from policies.rules import RULES, get_rule
-from policies.static import check_length, head_buffers
+from policies.static import check_length
 from settings import setting
 
 DISTRIBUTIONS = ("normal", "uniform")
@@ -44,6 +44,7 @@ class HebbianState:
     work: np.ndarray
     out: np.ndarray
     features: ConvFeatures | None
+    buffer: np.ndarray  # the head's state array (policies.kernels.head_state): the arrays above are views of it
 
     def layer_weights(self, net: NetworkSpec) -> list[np.ndarray]:
         """The current true weights of each dense layer, (n_out, n_in) each."""
@@ -112,15 +113,17 @@ class HebbianPolicy(Policy):
 
     def reset(self, params: np.ndarray, rng: np.random.Generator) -> HebbianState:
         weights, conv = self.initial_weights(params, rng)
-        work, out = head_buffers(self.net)
+        buffer, views = head_state(self._sizes, self.net.squash_out, self.normalise, plastic=True)
+        views["weights"][:] = weights
+        views["folded"][:] = self.fold(params)
         features = ConvFeatures(conv, self.net.conv_shapes) if conv is not None else None
-        return HebbianState(weights, self.fold(params), np.ones(3, dtype=np.float32), work, out, features)
+        return HebbianState(views["weights"], views["folded"], views["scale"], views["work"], views["out"], features,
+                            buffer)
 
     def act(self, params: np.ndarray, state: HebbianState, obs: np.ndarray):
         if state.features is not None:
             obs = state.features(obs)
-        hebbian_forward_update(state.weights, state.folded, state.scale, obs, state.work,
-                               *self._sizes, self.net.squash_out, self.normalise)
+        hebbian_step(state.buffer, obs)
         return state.out, state
 
     def layer_weights(self, state: HebbianState) -> list[np.ndarray]:
@@ -160,6 +163,7 @@ class HebbianPolicy(Policy):
         """The original Hebbian code's name (docs/original.md, "Files")."""
         return (f"HEBcoeffs__{env}__rew_{reward}__{self.rule.name}__init_{self.init_weights}__pop_{population}"
                 f"__{role}__{generation}.dat")
+
 
 # --- the kind (policies.registry.KINDS) ----------------------------------------------------------------
 

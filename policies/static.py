@@ -14,7 +14,7 @@ import numpy as np
 from policies.base import Policy
 from policies.conv import ConvFeatures
 from policies.init import default_init
-from policies.kernels import static_forward
+from policies.kernels import head_state, static_step
 from policies.network import Layout, NetworkSpec, to_kernel_layout
 from policies.plugin import Network
 
@@ -25,12 +25,7 @@ class StaticState:
     work: np.ndarray
     out: np.ndarray
     features: ConvFeatures | None
-
-
-def head_buffers(net: NetworkSpec) -> tuple[np.ndarray, np.ndarray]:
-    """The per-episode work buffer [x | h1 | h2 | out] and the view of its output."""
-    work = np.zeros(sum(net.head_sizes), dtype=np.float32)
-    return work, work[-net.n_actions:]
+    buffer: np.ndarray  # the head's state array (policies.kernels.head_state): head, work and out are views of it
 
 
 def check_length(name: str, array: np.ndarray, expected: int, what: str) -> np.ndarray:
@@ -81,15 +76,16 @@ class StaticPolicy(WeightFile):
         return default_init(self.layout, rng, fan_in)
 
     def reset(self, params: np.ndarray, rng: np.random.Generator | None = None) -> StaticState:
-        work, out = head_buffers(self.net)
+        buffer, views = head_state(self._sizes, self.net.squash_out)
+        views["weights"][:] = to_kernel_layout(params[self._head], self.net.layer_shapes)
         features = (ConvFeatures(params[:self.net.conv_size], self.net.conv_shapes)
                     if self.net.pixels else None)
-        return StaticState(to_kernel_layout(params[self._head], self.net.layer_shapes), work, out, features)
+        return StaticState(views["weights"], views["work"], views["out"], features, buffer)
 
     def act(self, params: np.ndarray, state: StaticState, obs: np.ndarray):
         if state.features is not None:
             obs = state.features(obs)
-        static_forward(state.head, obs, state.work, *self._sizes, self.net.squash_out)
+        static_step(state.buffer, obs)
         return state.out, state
 
 
