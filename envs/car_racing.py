@@ -70,7 +70,10 @@ _STATE_MODES = ("state_pixels", "state_pixels_list")
 # smoothscale's backends whose arithmetic envs.car_racing_observation reproduces (NEON runs the SSE2
 # code through sse2neon); with another (GENERIC: pygame's plain C filter), pygame shrinks the picture
 _SPAN_BACKENDS = ("SSE2", "NEON")
-_SCORES_KEPT = 256  # score texts whose pixels are kept (17.6 kB each: 4.5 MB at most per environment)
+# score texts whose pixels are kept: every text an environment's rewards write (from -100 to a lap's 1000 and
+# some, about 1,100), grey at one byte a pixel (4.4 kB each), so at most 18 MB per environment. With the first
+# 256 kept, a trained agent's scores, past 256, had been rendered again at most steps (a tenth of a step)
+_SCORES_KEPT = 4096
 
 
 def _rotated(x: np.ndarray, y: np.ndarray, angle: float) -> tuple[np.ndarray, np.ndarray]:
@@ -810,7 +813,9 @@ class FastCarRacing(stock.CarRacing):
     def _score_image(self) -> tuple[np.ndarray, int, int]:
         """The score's pixels as the stock blit writes them, and where: made once per distinct text and
         kept, the first ``_SCORES_KEPT`` texts of this environment (an episode's scores recur in the next:
-        a text is rendered in about 60 us, and changes every few steps)."""
+        a text is rendered in about 60 us, and changes every few steps). White on black, the pixels are
+        grey: kept as one byte each (uint8, the pixel being that byte in each channel), else as they are
+        (uint32); ``envs.car_racing_observation.observe`` reads either."""
         text = f"{self.reward:04.0f}"
         kept = self._score_pixels.get(text)
         if kept is not None:
@@ -822,7 +827,11 @@ class FastCarRacing(stock.CarRacing):
         rect.center = (60, _H - _H * 2.5 / 40.0)
         copy = pygame.Surface(image.get_size())  # the frame's pixel format
         copy.blit(image, (0, 0))
-        kept = (np.ascontiguousarray(pygame.surfarray.array2d(copy).T), rect.x, rect.y)
+        pixels = np.ascontiguousarray(pygame.surfarray.array2d(copy).T)
+        grey = (pixels & 0xFF).astype(np.uint8)
+        if np.array_equal(pixels, grey.astype(pixels.dtype) * 0x010101):
+            pixels = grey
+        kept = (pixels, rect.x, rect.y)
         if len(self._score_pixels) < _SCORES_KEPT:
             self._score_pixels[text] = kept
         return kept

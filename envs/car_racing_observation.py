@@ -29,8 +29,9 @@ random polygons, random pictures, and the environment side by side with Gymnasiu
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, types
 from numba.cpython.unsafe.numbers import trailing_zeros
+from numba.extending import overload
 
 from envs.pygame_raster import SPAN_BITS, append, blend, draw_polygon, gfx_aapolygon, gfx_filled_polygon, span_record
 
@@ -157,14 +158,15 @@ def _mixed_pixel(row, first, last, fewest, weight, carried, reciprocal):
     depends on the column (their mispredictions were most of the cost). Blue and red are summed in
     the lanes of one integer, green in another (ten pixels of 255 fit 16 bits)."""
     blue_red, green_sum = 0, 0
-    for x in range(first, first + fewest):
+    start = np.uint64(first)  # (unsigned indices: no check for negative ones)
+    for x in range(start, start + np.uint64(fewest)):
         pixel = np.int64(row[x])
         blue_red += pixel & 0xFF00FF
         green_sum += pixel & 0xFF00
-    pixel = np.int64(row[first + fewest]) * (last - first - fewest)  # (the shared pixel, times 0, if not whole)
+    pixel = np.int64(row[start + np.uint64(fewest)]) * (last - first - fewest)  # (shared, times 0, if not whole)
     blue_red += pixel & 0xFF00FF
     green_sum += pixel & 0xFF00
-    value, previous = np.int64(row[last]), np.int64(row[first - 1])
+    value, previous = np.int64(row[np.uint64(last)]), np.int64(row[start - np.uint64(1)])
     blue = _channel(blue_red & _LANE, (4 * (previous & 0xFF) * carried) >> 16, value & 0xFF, weight, reciprocal)
     green = _channel(green_sum >> 8, (4 * ((previous >> 8) & 0xFF) * carried) >> 16, (value >> 8) & 0xFF, weight,
                      reciprocal)
@@ -197,9 +199,21 @@ def _unpack(record):
     return record & mask, (record >> SPAN_BITS) & mask, (record >> 28) & 0xFFFFFF, (record >> 20) & 0xFF
 
 
+def _text_pixel(value):
+    """A pixel of the text block: uint32 as it is, a uint8 grey as that byte in each channel."""
+
+
+@overload(_text_pixel, jit_options=_FLAGS)
+def _text_pixel_overload(value):
+    if value == types.uint8:
+        return lambda value: np.uint32(value) * np.uint32(0x010101)
+    return lambda value: value
+
+
 @njit(**_FLAGS)
 def observe(records, counts, background, text, text_x, text_y, x_schedule, y_schedule, work, out):
-    """The (rows, columns, RGB) observation of a height x width picture given as span records.
+    """The (rows, columns, RGB) observation of a height x width picture given as span records, the text
+    block ``text`` (uint32 pixels, or uint8 greys: ``_text_pixel``) over them at (``text_x``, ``text_y``).
 
     ``work``: (row buffer uint32 (width), mixed flags bool (columns, then a flag set for good past
     them, padded to a multiple of 8), the same flags as uint64 words (a view), x-shrunk row int64
@@ -240,20 +254,22 @@ def observe(records, counts, background, text, text_x, text_y, x_schedule, y_sch
                     for x in range(x1, x2 + 1):
                         row[x] = color
                 else:
-                    row[x1] = blend(row[x1], color, alpha)
+                    at = np.uint64(x1)  # (unsigned: no check for a negative index)
+                    row[at] = blend(row[at], color, alpha)
             # flag the output pixels in which two neighbouring source pixels differ: only at a span's
             # end (x1, or x2 + 1), and not where a later span hides it or the colours are the same,
             # which the painted row tells (about 4.6 flagged output pixels per row instead of 7.9)
             for k in range(counts[y]):
                 x1, x2, _, _ = _unpack(records[y, k])
-                if x1 > 0 and row[x1] != row[x1 - 1]:
-                    mixed[column_of[x1]] = True  # pixels x1 - 1 and x1 are in the output pixel of x1
-                if x2 + 1 < width and row[x2 + 1] != row[x2]:
-                    mixed[column_of[x2 + 1]] = True
+                start, end = np.uint64(x1), np.uint64(x2 + 1)  # (unsigned: no checks for negative indices)
+                if x1 > 0 and row[start] != row[start - np.uint64(1)]:
+                    mixed[np.uint64(column_of[start])] = True  # pixels x1 - 1 and x1 are in the output pixel of x1
+                if x2 + 1 < width and row[end] != row[end - np.uint64(1)]:
+                    mixed[np.uint64(column_of[end])] = True
             line = y - text_y
             if 0 <= line < text.shape[0]:
                 for x in range(max(text_x, 0), min(text_x + text.shape[1], width)):
-                    row[x] = text[line, x - text_x]
+                    row[x] = _text_pixel(text[line, x - text_x])
                     mixed[column_of[x]] = True
                 if text_x + text.shape[1] < width:
                     mixed[column_of[max(text_x + text.shape[1], 0)]] = True

@@ -398,7 +398,8 @@ def test_compiled_drawing_writes_pygames_pixels(name):
 
 def test_span_observation_is_smoothscale_of_pygames_drawing():
     """Polygons recorded as spans and shrunk from them give what pygame draws and smoothscale shrinks,
-    flipped or not, with a text block, at CarRacing's sizes (1000 x 800 -> 96 x 96)."""
+    flipped or not, with a text block (pixels, or greys of one byte), at CarRacing's sizes (1000 x 800 ->
+    96 x 96)."""
     rng = np.random.default_rng(30)
     width, height = 1000, 800
     spans = SpanObservation(width, height, 96, 96, capacity=4)  # small: the list must grow
@@ -408,7 +409,10 @@ def test_span_observation_is_smoothscale_of_pygames_drawing():
         colors = [tuple(int(c) for c in rng.integers(0, 256, size=3)) for _ in range(count)]
         smooth = rng.random(count) < 0.7
         background = tuple(int(c) for c in rng.integers(0, 256, size=3))
-        text = rng.integers(0, 1 << 24, size=(int(rng.integers(1, 40)), int(rng.integers(1, 90))), dtype=np.uint32)
+        size = (int(rng.integers(1, 40)), int(rng.integers(1, 90)))
+        text = rng.integers(0, 1 << 24, size=size, dtype=np.uint32)
+        if trial % 3 == 2:  # greys, one byte a pixel, as the score's pixels are kept
+            text = rng.integers(0, 256, size=size, dtype=np.uint8)
         text_x, text_y = int(rng.integers(-20, width - 20)), int(rng.integers(-20, height - 20))
         flip = bool(trial % 2)
         expected = pygame.Surface((width, height))
@@ -422,7 +426,7 @@ def test_span_observation_is_smoothscale_of_pygames_drawing():
         if flip:
             expected = pygame.transform.flip(expected, False, True)
         text_surface = pygame.Surface(text.shape[::-1])
-        pygame.surfarray.blit_array(text_surface, text.T)
+        pygame.surfarray.blit_array(text_surface, (text.astype(np.uint32) * (0x010101 if text.dtype == np.uint8 else 1)).T)
         expected.blit(text_surface, (text_x, text_y))
         expected = pygame.surfarray.array3d(pygame.transform.smoothscale(expected, (96, 96))).transpose(1, 0, 2)
 
