@@ -4,14 +4,17 @@
     python benchmarks/car_racing.py               # speed, the training loops, the projection
     python benchmarks/car_racing.py --memory      # and the paper's Hebbian run's memory (PSS/USS)
     python benchmarks/car_racing.py --identity    # and long episodes compared step by step
+    python benchmarks/car_racing.py --baseline DIR    # instead: today's code against another checkout's
 
 Gymnasium's class is ``CarRacingStock-v3``, the project's ``CarRacing-v3``. Everything is timed in
 CPU time of this process, the two classes alternating (every 25 steps for ``env.step``, reset by
 reset, episode by episode for the training loops) so that this machine's drift and other load fall
 on both alike; the medians over rounds are printed.
 
-- environment: ``env.step`` of each class, the same seeds and random actions (resets untimed), and
-  ``env.reset`` (track generation, tile bodies, the first frame) on the same seeds; then ``env.step``
+- environment: ``env.step`` of each class, the same seeds and random actions (resets untimed), the same
+  on the actions of the committed trained agent (``results/paper/carracing_hebbian_seed1``, read only) on
+  the tracks of ``AGENT_SEEDS``, and ``env.reset`` (track generation, tile bodies, the first frame) on the
+  same seeds; then ``env.step``
   by step of the episode (``PHASES``): the camera zooms in over the first 50 steps, with the whole
   track in view at first, and generation-0 episodes end within it;
 - training loop, generation 0: the real evaluation path (serial evaluator, worker, recipe wrappers,
@@ -32,6 +35,14 @@ on both alike; the medians over rounds are printed.
   rewards, flags and info compared at every step and ``rgb_array`` frames every ``--frame_every``
   steps; exit code 1 on the first difference.
 
+``--baseline DIR`` (a checkout of another commit: ``git worktree add DIR COMMIT``) measures instead today's
+code against that checkout's, each in a process of its own that imports its checkout's modules and runs
+this script's measuring code (``throughput.Side``), the two taking turns round by round: a generation of
+the paper's Hebbian run on the committed agent (``--generation_popsize``, the paper's 200 by default;
+sigma 0.1, 1000-step episodes, 2 worker processes; wall time per environment step), whose returns must
+be the same on both sides, and the fast class's ``env.step`` on random actions and on the agent's (CPU
+time). Its record is ``car_racing-against-baseline``.
+
 Each run writes its record to benchmarks/results/ (benchmarks/record.py): every ratio and rate below
 with its rounds, the projections computed round by round.
 
@@ -51,12 +62,16 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+# the checkout whose modules this process imports and measures: this one, or in a side process of --baseline
+# the one named after --_side; and this one last where it is missing (benchmarks/record.py would put it first)
+sys.path.insert(0, sys.argv[sys.argv.index("--_side") + 1] if "--_side" in sys.argv[:-1]
+                else str(Path(__file__).resolve().parent.parent))
+sys.path.append(str(Path(__file__).resolve().parent.parent))
 
 import gymnasium as gym
 from gymnasium.envs.box2d.car_racing import FPS
 from record import Record, add_results_flag
-from throughput import generation_tasks
+from throughput import SIDE, alternating, baseline_error, generation_tasks, serve, sides
 
 import envs
 from cli.flags import positive_int
@@ -64,7 +79,7 @@ from envs import ProblemSpec
 from envs.make import STOCK_CAR_RACING_ID as STOCK_ID
 from envs.rollout import rollout
 from envs.wrappers import CarRacingAction, PixelObservation
-from es.backends import Generation, SerialEvaluator
+from es.backends import Generation, ProcessEvaluator, SerialEvaluator
 from es.noise import NoiseTable
 from policies import PolicySettings
 
@@ -73,6 +88,9 @@ ENV_TARGET, RESET_TARGET, LOOP_TARGET = 8.0, 2.5, 5.0
 PAPER_POPSIZE, PAPER_GENERATIONS, FULL_EPISODE = 200, 300, 1000
 ZOOM_IN = FPS  # the camera zooms in over an episode's first second
 PHASES = ((0, 10), (10, 20), (20, 30), (30, ZOOM_IN), (ZOOM_IN, 120))  # steps of an episode, from its reset
+AGENT = Path(__file__).resolve().parent.parent / "results" / "paper" / "carracing_hebbian_seed1"  # read only
+AGENT_SEEDS = (5, 1, 3)  # tracks of the committed agent's episodes (seed 5: the whole 1000 steps)
+PAPER_SIGMA, GENERATION_WORKERS = 0.1, 2
 
 
 def make(env_id: str, render_mode: str | None = None) -> gym.Env:
@@ -128,6 +146,69 @@ def env_rates(rounds: int, steps: int, chunk: int = 25) -> tuple[list[float], li
             stock_seconds, fast_seconds = (sum(seconds) for seconds in zip(*chunks))
             stock_rates.append(len(actions) / stock_seconds)
             fast_rates.append(len(actions) / fast_seconds)
+    return stock_rates, fast_rates
+
+
+def agent_params(policy, folder: Path = AGENT) -> np.ndarray:
+    """The committed paper run's last centre (its last_coeffs.dat and last_CNN_parameters.dat) for ``policy``
+    (the paper's CarRacing Hebbian network, ABCD_lr)."""
+    from es.files import load_dat
+
+    runs = sorted(path for path in folder.iterdir() if path.is_dir()) if folder.is_dir() else []
+    if not runs or not (runs[-1] / "last_coeffs.dat").is_file():
+        raise ValueError(f"no committed CarRacing Hebbian run in {folder} (its last_coeffs.dat and "
+                         "last_CNN_parameters.dat)")
+    return policy.load({"coeffs": load_dat(runs[-1] / "last_coeffs.dat"),
+                        "CNN_parameters": load_dat(runs[-1] / "last_CNN_parameters.dat")})
+
+
+def agent_problem():
+    """The paper's CarRacing Hebbian problem (``CarRacing-v3``, ABCD_lr, uniform initial weights) and the
+    committed agent's parameters."""
+    problem = ProblemSpec((FAST_ID,), PolicySettings("hebbian", "ABCD_lr", "uni")).build()
+    try:
+        return problem, agent_params(problem.policy)
+    except BaseException:
+        problem.close()
+        raise
+
+
+def agent_episodes(seeds: tuple[int, ...], length: int) -> list[tuple[int, np.ndarray]]:
+    """The committed agent's episodes on ``seeds`` (at most ``length`` steps each, the recipe's early stop
+    included): each seed and the actions ``env.step`` of the class received, in order."""
+    problem, params = agent_problem()
+    _, squash, _ = _pixel_chain(problem)
+    mapping, actions = squash.action, []
+
+    def recorded(output):
+        action = mapping(output)
+        actions.append(np.array(action, copy=True))
+        return action
+    squash.action = recorded
+    episodes = []
+    try:
+        for seed in seeds:
+            actions.clear()
+            rollout(problem.envs[0], problem.policy, params, seed, max_steps=length)
+            episodes.append((seed, np.array(actions)))
+    finally:
+        problem.close()
+    return episodes
+
+
+def episode_rates(rounds: int, episodes: list[tuple[int, np.ndarray]], chunk: int = 25) -> tuple[list[float],
+                                                                                               list[float]]:
+    """``env_rates`` on given episodes (seed, actions) instead of random actions: each round all of them."""
+    stock_rates, fast_rates = [], []
+    with both_classes() as (stock, fast):
+        for _ in range(rounds):
+            seconds, steps = [0.0, 0.0], 0
+            for seed, actions in episodes:
+                for pair in zip(timed_steps(stock, seed, actions, chunk), timed_steps(fast, seed, actions, chunk)):
+                    seconds = [total + part for total, part in zip(seconds, pair)]
+                steps += len(actions)
+            stock_rates.append(steps / seconds[0])
+            fast_rates.append(steps / seconds[1])
     return stock_rates, fast_rates
 
 
@@ -431,6 +512,96 @@ def projection(record: Record, key: str, step_rates: tuple[list[float], list[flo
               f"stock {statistics.median(hours[0]):.1f} h, fast{label} {statistics.median(hours[1]):.1f} h")
 
 
+# --- today's code against a baseline checkout, side by side (--baseline) --------------------------------
+
+
+def side_requests() -> dict:
+    """What a side of ``--baseline`` answers, with its own checkout's code: a generation of the paper's
+    Hebbian run on the committed agent (set up once), and the fast class's ``env.step`` on given actions."""
+    held: dict = {}
+
+    def generation_start(popsize: int, workers: int, sigma: float, seed: int, agent: str) -> dict:
+        spec = ProblemSpec((FAST_ID,), PolicySettings("hebbian", "ABCD_lr", "uni"))
+        problem = spec.build()
+        theta = agent_params(problem.policy, Path(agent))
+        problem.close()
+        noise = NoiseTable.create(0, max(1 << 20, 4 * theta.size), shared=True)
+        evaluator = ProcessEvaluator(spec.build, noise, theta.size, spec.env_ids, workers)
+        tasks = generation_tasks(popsize, theta.size, noise, np.random.default_rng(seed))
+        evaluator.evaluate(Generation(0, theta, sigma, tasks[:workers]))  # warm-up: the workers' compilation
+        held.update(evaluator=evaluator, noise=noise, theta=theta, tasks=tasks, sigma=sigma)
+        return {"parameters": int(theta.size)}
+
+    def generation() -> dict:
+        started = time.perf_counter()
+        results = held["evaluator"].evaluate(Generation(0, held["theta"], held["sigma"], held["tasks"]))
+        return {"seconds": time.perf_counter() - started, "steps": int(results.steps.sum()),
+                "returns": [float(value) for value in results.returns]}
+
+    def env_steps(seed: int, actions: list) -> float:
+        env = held.get("env")
+        if env is None:
+            env = held["env"] = make(FAST_ID)
+            sum(timed_steps(env, 0, random_actions(np.random.default_rng(0), 5), 5))  # numba's compiled code
+        return sum(timed_steps(env, seed, np.array(actions, dtype=np.float32), len(actions)))
+
+    def stop() -> bool:
+        if "evaluator" in held:
+            held.pop("evaluator").close()
+            held.pop("noise").close()
+        if "env" in held:
+            held.pop("env").close()
+        return True
+    return {"generation_start": generation_start, "generation": generation, "env_steps": env_steps, "stop": stop}
+
+
+def against_baseline(args, record: Record) -> None:
+    """Today's code against ``args.baseline``'s, each in a side process, taking turns round by round: a
+    generation of the paper's Hebbian run on the committed agent (popsize ``--generation_popsize``, 1000-step
+    episodes, 2 workers, wall time per step), whose returns must be the same on both sides; and the fast
+    class's ``env.step`` on random actions and on the agent's (CPU time)."""
+    random_episodes = [(600 + index, random_actions(np.random.default_rng(600 + index), args.steps))
+                       for index in range(3)]
+    agent = agent_episodes(AGENT_SEEDS, FULL_EPISODE)
+    named = sides(__file__, args.baseline)
+    try:
+        for side in named.values():
+            side.ask("generation_start", popsize=args.generation_popsize, workers=GENERATION_WORKERS,
+                     sigma=PAPER_SIGMA, seed=1, agent=str(AGENT))
+        generations = alternating(args.rounds, named, "generation")
+        for kind, episodes in (("random", random_episodes), ("agent", agent)):
+            seconds = {name: [0.0] * args.rounds for name in named}
+            for seed, actions in episodes:
+                answers = alternating(args.rounds, named, "env_steps", seed=seed, actions=actions.tolist())
+                for name in named:
+                    seconds[name] = [total + part for total, part in zip(seconds[name], answers[name])]
+            steps = sum(len(actions) for _, actions in episodes)
+            summary(record, f"env_step_{kind}_against_baseline", f"environment (env.step), {kind} actions, today's "
+                    "fast class against the baseline's", [steps / spent for spent in seconds["baseline"]],
+                    [steps / spent for spent in seconds["today"]], stock_name="the baseline's")
+        for side in named.values():
+            side.ask("stop")
+    finally:
+        for side in named.values():
+            side.close()
+    today, baseline = generations["today"], generations["baseline"]
+    if any(ours["returns"] != theirs["returns"] for ours, theirs in zip(today, baseline)):
+        raise AssertionError("today's code and the baseline's give different returns on the same generation")
+    per_step = {name: [answer["seconds"] / answer["steps"] for answer in answers]
+                for name, answers in generations.items()}
+    label = (f"a generation of the paper's Hebbian run on the committed agent (popsize {args.generation_popsize}, "
+             f"{FULL_EPISODE}-step episodes, {GENERATION_WORKERS} workers, wall time)")
+    record.add("generation_against_baseline", f"{label}: the baseline's time per step / today's", "x",
+               [theirs / ours for ours, theirs in zip(per_step["today"], per_step["baseline"])])
+    for name in named:
+        record.add(f"generation_seconds_{name}", f"{label}: {name}'s code, seconds per generation", "s",
+                   [answer["seconds"] for answer in generations[name]])
+    speedups = record.measures["generation_against_baseline"].values
+    print(f"{label}: {today[0]['steps']:,} steps; today's code {statistics.median(speedups):.2f}x as fast as the "
+          f"baseline's (rounds: {', '.join(f'{value:.2f}' for value in speedups)}); the same returns on both sides")
+    record.note("baseline", str(args.baseline))
+
+
 def summary(record: Record, key: str, label: str, stock: list[float], fast: list[float], target: float | None = None,
             unit: str = "steps", stock_name: str = "Gymnasium's") -> None:
     ratios = [f / s for s, f in zip(stock, fast)]
@@ -438,11 +609,14 @@ def summary(record: Record, key: str, label: str, stock: list[float], fast: list
     record.add(f"{key}_stock", f"{label}: {stock_name} class, {unit} per CPU second", f"{unit}/s", stock)
     record.add(f"{key}_fast", f"{label}: the fast class, {unit} per CPU second", f"{unit}/s", fast)
     goal = f" (target >= {target}x)" if target else ""
-    print(f"{label}: stock {statistics.median(stock):,.1f}, fast {statistics.median(fast):,.1f} {unit} per CPU "
-          f"second; ratio {statistics.median(ratios):.2f}x{goal} (rounds: {', '.join(f'{r:.2f}' for r in ratios)})")
+    print(f"{label}: {stock_name} {statistics.median(stock):,.1f}, the fast class {statistics.median(fast):,.1f} "
+          f"{unit} per CPU second; ratio {statistics.median(ratios):.2f}x{goal} (rounds: "
+          f"{', '.join(f'{r:.2f}' for r in ratios)})")
 
 
 def main() -> int:
+    if SIDE in sys.argv:
+        return serve(side_requests())
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument("--rounds", type=positive_int, default=5)
     parser.add_argument("--steps", type=positive_int, default=300, help="environment steps per class and round")
@@ -461,10 +635,36 @@ def main() -> int:
                         help="with --identity: how many episodes")
     parser.add_argument("--frame_every", type=positive_int, default=50,
                         help="with --identity: compare render() this often")
+    parser.add_argument("--baseline", type=Path, metavar="DIR",
+                        help="instead, today's code against this checkout's (git worktree add DIR COMMIT), side by "
+                             "side: a generation of the paper's Hebbian run on the committed agent, and env.step")
+    parser.add_argument("--generation_popsize", type=positive_int, default=PAPER_POPSIZE,
+                        help="with --baseline: the generation's population (the paper's: 200)")
     add_results_flag(parser)
     args = parser.parse_args()
+    if args.baseline is not None:
+        args.baseline = args.baseline.expanduser().resolve()
+        if error := baseline_error(args.baseline):
+            print(f"error: {error}", file=sys.stderr)
+            return 2
+        record = Record("car_racing-against-baseline")
+        try:
+            against_baseline(args, record)
+        except ValueError as error:
+            print(f"error: {error}", file=sys.stderr)
+            return 2
+        record.write(args.results)
+        return 0
     record = Record("car_racing")
     summary(record, "env_step", "environment (env.step)", *env_rates(args.rounds, args.steps), ENV_TARGET)
+    try:
+        agent = agent_episodes(AGENT_SEEDS, FULL_EPISODE)
+    except ValueError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    summary(record, "env_step_agent", "environment (env.step), the committed agent's actions (seeds "
+            f"{', '.join(map(str, AGENT_SEEDS))}, {sum(len(actions) for _, actions in agent)} steps)",
+            *episode_rates(args.rounds, agent), ENV_TARGET)
     summary(record, "env_reset", "environment (env.reset)", *reset_rates(args.rounds, args.resets), RESET_TARGET,
             unit="resets")
     phases = [f"{first}-{end - 1}: {stock * 1e3:.2f} / {fast * 1e3:.2f} ms, {stock / fast:.1f}x"
