@@ -331,7 +331,7 @@ def test_paper_report_names_the_missing_best_evaluation(tmp_path, rliable):
     done = subprocess.run([sys.executable, "experiments/paper.py", "ant", "report", "--centre", "best", "--runs",
                            str(tmp_path)], check=False, cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert done.returncode == 2
-    assert done.stderr.strip().splitlines() == [
-        f"paper.py: error: no static run in {tmp_path}/ant_static_seed* has evaluation_best.json; run python "
-        "experiments/paper.py ant static --seed N first"]
+    assert done.stderr.strip().splitlines() == [  # (both kinds lack one: the first kind of the registry is named)
+        f"paper.py: error: no hebbian run in {tmp_path}/ant_hebbian_seed* has evaluation_best.json; run python "
+        "experiments/paper.py ant hebbian --seed N first"]
     assert not (tmp_path / "ant_report_best").exists()
