@@ -9,7 +9,7 @@ torso's velocity, the contacts: seven calls for the ant) and keeps every line of
 order on the same dtypes, so observations, rewards and episode ends are pyBullet's own
 (``tests/test_bullet_locomotion.py`` steps both side by side).
 
-Its own arithmetic is the same on every CPU. pyBullet's ``calc_state`` leaves four of its operations to
+Its own arithmetic is the same whatever code the CPU takes. pyBullet's ``calc_state`` leaves four of its operations to
 code that numpy and OpenBLAS choose by the CPU they run on: ``np.arctan2`` (numpy's AVX-512 code
 differs from the C library's in the last bit), ``np.sin`` and ``np.cos`` (the C library's on every CPU
 measured, numpy's own where it has one), ``np.linalg.norm`` of two numbers and ``np.dot`` of a 3 × 3
@@ -17,8 +17,10 @@ matrix with a 3-vector (OpenBLAS: a fused multiply-add or not, by kernel). Here 
 library's scalar ``math.atan2``, ``math.sin`` and ``math.cos``, a plain ``sqrt(dy² + dx²)``, and each
 row of the rotation as ``fma(r0, s0, r1 s1) + r2 s2`` with an exactly emulated fused multiply-add:
 the numbers pyBullet's class gives on an x86-64 CPU with AVX2 and FMA but without AVX-512 (OpenBLAS's
-Haswell and Zen kernels), whatever CPU this class runs on. On a CPU with AVX-512, or one without AVX2,
-pyBullet's own class gives other last bits, and its episodes part from these (docs/reproducibility.md).
+Haswell and Zen kernels), whatever CPU this class runs on, given the same C library's code for its scalar
+functions (glibc picks them by the CPU's FMA and AVX2, as it does for the physics). On a CPU with AVX-512, or
+one without AVX2, pyBullet's own class gives other last bits, and its episodes part from these
+(docs/reproducibility.md).
 
 The registered ``*BulletEnv-v0`` walkers make the fast classes; ``envs.bullet_locomotion.STOCK_IDS``
 maps each to a ``*BulletStockEnv-v0`` id that makes pyBullet's own class, to check any result
@@ -237,7 +239,7 @@ class FastWalker:
         if robot.initial_z is None:
             robot.initial_z = z
         r, p, yaw = robot.body_rpy
-        # the module's docstring: each operation as pyBullet's class gives it on an AVX2 CPU, on every CPU
+        # the module's docstring: each operation as pyBullet's class gives it on an AVX2 CPU, whatever the CPU
         dy = float(robot.walk_target_y - robot.body_xyz[1])
         dx = float(robot.walk_target_x - robot.body_xyz[0])
         robot.walk_target_theta = np.float64(math.atan2(dy, dx))
