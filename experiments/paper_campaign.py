@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import shlex
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -118,6 +119,10 @@ def write_pages(runs: Path, experiment: str) -> None:
         return
     say(f"campaign: wrote the report of {experiment}'s evaluated runs in {shown(report_folder(runs, experiment))} "
         f"({', '.join(environment for environment, _, _ in reported)})")
+    # the replication report reads every experiment's report: rewritten with them (in a process of its own,
+    # as its command runs; its own line says what it wrote, or why not)
+    subprocess.run([sys.executable, str(ROOT / "experiments" / "replication.py"), "--runs", str(runs)], cwd=ROOT,
+                   check=False)
 
 
 def entry_folder(args: argparse.Namespace) -> Path:

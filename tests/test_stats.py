@@ -284,6 +284,10 @@ def test_paper_report_of_real_carracing_runs(tmp_path, rliable):
         # a chunk's end writes the report once both kinds have an evaluated run, not before
         paper_campaign.write_pages(tmp_path, "carracing")
         assert (tmp_path / "carracing_report").exists() == (kind == "hebbian")
+        # and with it the replication report, which reads every experiment's report
+        assert (tmp_path / "REPLICATION.md").exists() == (kind == "hebbian")
+    assert "| CarRacing: the Hebbian network drives better than the static one |" in (
+        tmp_path / "REPLICATION.md").read_text()
     # the runs named relative to the folder of runs, so that the report reads the same from any clone
     with open(tmp_path / "carracing_report" / "CarRacing-v3" / "scores.csv", newline="") as handle:
         named = sorted(row["run"] for row in csv.DictReader(handle))
