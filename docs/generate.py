@@ -100,6 +100,10 @@ MARKERS: dict[str, Marker] = {
         "EXPERIMENT ENVIRONMENT", (2,), "the campaign's report of an experiment on an environment: each kind's IQM "
         "and mean with their intervals and P(Hebbian > static), once every run it plans is in",
         lambda words, where: runs_files.report(*words, where.page, where.runs), pending=runs_files.REPORT_PENDING),
+    "weight": Marker(
+        "RUN", (1,), "what a campaign run adds to a clone: its checkpoint, committed by each chunk, then its final "
+        "weights, evaluations and pictures, from the sizes of its files",
+        lambda words, where: runs_files.weight(words[0], where.page, where.runs), pending=runs_files.PENDING),
     "remaining": Marker(
         "", (0,), "the campaign's remaining runs and what they will cost, projected from its completed runs "
         "(experiments/cost.py)", lambda words, where: runs_files.remaining(where.page, where.runs), moving=True),

@@ -148,6 +148,25 @@ def frames(name: str, page: Path, runs: Path = RUNS) -> str:
     return f"![{name}: every 100th frame of its first evaluation episode]({link(run / 'frames.png', page)})"
 
 
+def weight(name: str, page: Path, runs: Path = RUNS) -> str:
+    """What a campaign run adds to a clone, from its evaluated run folder's files: "each chunk commits its
+    checkpoint.npz (3.6 MB); completed, the run adds its final weights (2.7 MB) and its evaluations and pictures
+    (0.2 MB)"."""
+    run = evaluated(name, runs)
+    if run is None:
+        return PENDING
+
+    def size(paths) -> str:
+        return f"{sum(path.stat().st_size for path in paths) / 1e6:.1f} MB"
+
+    kept = [run / file for file in campaign.KEPT if (run / file).is_file()]
+    pictures = [path for path in kept if path.name not in ("checkpoint.npz", "config.json", "metrics.csv")]
+    return (f"each chunk commits its [checkpoint.npz]({link(run / 'checkpoint.npz', page)}) "
+            f"({size([run / 'checkpoint.npz'])}) beside its config.json and metrics.csv; completed, the run adds its "
+            f"final weights ({size(run.glob(campaign.FINAL_WEIGHTS))}) and its evaluations and pictures "
+            f"({size(pictures)})")
+
+
 def campaign_folders(experiment: str) -> dict[str, set[str]]:
     """Per kind, the folders of the runs experiments/paper/campaign.toml plans for ``experiment``."""
     planned: dict[str, set[str]] = {}

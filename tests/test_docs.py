@@ -667,6 +667,31 @@ def evaluated_runs(tmp_path_factory) -> Path:
     return runs
 
 
+def test_what_a_run_adds_to_a_clone_is_rendered_from_its_files(evaluated_runs):
+    """<!-- weight:RUN -->: the sizes of the files a campaign run commits, its checkpoint per chunk, then its final
+    weights and its evaluations and pictures; the headline <!-- headline:RUN --> is its mean ± std, linked."""
+    page = ROOT / "experiments" / "README.md"
+    (run,) = [path for path in (evaluated_runs / "carracing_hebbian_seed1").iterdir() if path.is_dir()]
+
+    def megabytes(*names: str) -> str:
+        return f"{sum((run / name).stat().st_size for name in names) / 1e6:.1f} MB"
+
+    pictures = [name for name in ("evaluation.json", "evaluation_best.json", "adaptation.png", "frames.png")
+                if (run / name).is_file()]
+    assert generate.render("<!-- weight:carracing_hebbian_seed1 --><!-- end weight -->", page, runs=evaluated_runs) \
+        == (f"<!-- weight:carracing_hebbian_seed1 -->each chunk commits its [checkpoint.npz]"
+            f"({os.path.relpath(run / 'checkpoint.npz', page.parent)}) ({megabytes('checkpoint.npz')}) beside its "
+            f"config.json and metrics.csv; completed, the run adds its final weights "
+            f"({megabytes(*(path.name for path in run.glob('last*.dat')))}) and its evaluations and pictures "
+            f"({megabytes(*pictures)})<!-- end weight -->")
+    (entry,) = json.loads((run / "evaluation.json").read_text())["environments"]
+    headline = generate.render("<!-- headline:carracing_hebbian_seed1 --><!-- end headline -->", page,
+                               runs=evaluated_runs)
+    assert headline == (f"<!-- headline:carracing_hebbian_seed1 -->[**{number(entry['mean'])} ± "
+                        f"{number(entry['std'])}**]({os.path.relpath(run / 'evaluation.json', page.parent)})"
+                        "<!-- end headline -->")
+
+
 def test_a_campaign_result_is_rendered_from_its_evaluation(evaluated_runs):
     from report.machine import cpu_model
 
