@@ -70,7 +70,7 @@ class Part:
 
 PARTS = (
     Part("task", "the rest: the episode loop, Gymnasium's wrappers, the stock step's bookkeeping, the reset less "
-         "its track", None, "es.worker.Worker.run, the pipe, less the parts below"),
+         "its track", None, "es.worker.Worker.run, less the other parts"),
     Part("messages", "the task and its result through a pipe", "task", "Connection.send, Connection.recv"),
     Part("parameters", "the member's parameters and their L2 penalty", "task", "Worker.params"),
     Part("policy_reset", "the network's reset: the rule folded, the initial weights", "task", "HebbianPolicy.reset"),
@@ -355,7 +355,8 @@ def count_task(seed: int, steps: int) -> tuple[dict[str, float], int]:
                    "--toggle-collect=part_task", f"--callgrind-out-file={output}", sys.executable, __file__,
                    "--_counted_child", str(library), "--seed", str(seed), "--steps", str(steps),
                    "--_steps_file", str(steps_file)]
-        run = subprocess.run(command, capture_output=True, text=True)
+        # (a fixed hash seed: the same dictionaries in the same order, so that the counts repeat to the instruction)
+        run = subprocess.run(command, capture_output=True, text=True, env={**os.environ, "PYTHONHASHSEED": "0"})
         if run.returncode != 0 or not steps_file.is_file():
             raise RuntimeError(f"the task under callgrind failed ({run.returncode}):\n{run.stderr[-3000:]}")
         counts, done = inclusive_counts(output), int(steps_file.read_text())
