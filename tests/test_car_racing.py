@@ -426,7 +426,8 @@ def test_span_observation_is_smoothscale_of_pygames_drawing():
         if flip:
             expected = pygame.transform.flip(expected, False, True)
         text_surface = pygame.Surface(text.shape[::-1])
-        pygame.surfarray.blit_array(text_surface, (text.astype(np.uint32) * (0x010101 if text.dtype == np.uint8 else 1)).T)
+        pixels = text.astype(np.uint32) * (0x010101 if text.dtype == np.uint8 else 1)  # a grey in each channel
+        pygame.surfarray.blit_array(text_surface, pixels.T)
         expected.blit(text_surface, (text_x, text_y))
         expected = pygame.surfarray.array3d(pygame.transform.smoothscale(expected, (96, 96))).transpose(1, 0, 2)
 
