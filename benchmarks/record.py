@@ -166,10 +166,11 @@ def read(path: Path) -> dict:
 STAMPED = re.compile(r"-\d{8}T\d{6}Z\.json$")  # a record's file name: its command's name, then when it was taken
 
 
-def newest(name: str, results: Path = RESULTS) -> tuple[Path, dict]:
-    """The newest record of the command ``name`` (``results/<name>-<time>.json``) not taken on a loaded machine, and
-    its path; ValueError where there is none. A page names the command, never one record: a new record of it
-    renders everywhere the figure appears."""
+def newest(name: str, results: Path = RESULTS, holds=lambda record: True) -> tuple[Path, dict]:
+    """The newest record of the command ``name`` (``results/<name>-<time>.json``) not taken on a loaded machine that
+    ``holds`` what is asked of it (a measure some runs of the command add, such as ``--memory``'s), and its path;
+    ValueError where there is none. A page names the command, never one record: a new record of it renders
+    everywhere the figure appears."""
     import glob
 
     stamped = sorted(path for path in results.glob(f"{glob.escape(name)}-*.json")
@@ -178,10 +179,14 @@ def newest(name: str, results: Path = RESULTS) -> tuple[Path, dict]:
     where = results.relative_to(ROOT) if results.is_relative_to(ROOT) else results
     if not stamped:
         raise ValueError(f"{name}: no record {where}/{name}-<time>.json")
+    quiet = False
     for path in reversed(stamped):
         record = read(path)
-        if not record["loaded"]:
+        quiet = quiet or not record["loaded"]
+        if not record["loaded"] and holds(record):
             return path, record
+    if quiet:
+        raise LookupError(f"{name}: no record of it taken on a quiet machine holds what is asked")
     raise ValueError(f"{name}: every record was taken on a loaded machine (the newest at load "
                      f"{max(record['load_before'], record['load_after']):.2f} on {record['cores']} cores); "
                      "measure again on a quiet machine")

@@ -30,20 +30,25 @@ def number(value: float) -> str:
         else f"{value:.3f}"
 
 
-def published(name: str, results: Path) -> tuple[Path, dict]:
-    """The newest record of the command ``name`` not taken on a loaded machine, and its path (``record.newest``);
-    FigureError where there is none."""
+def published(name: str, results: Path, holds=lambda record: True) -> tuple[Path, dict] | None:
+    """The newest record of the command ``name`` not taken on a loaded machine that ``holds`` what is asked, and its
+    path (``record.newest``); None where quiet records exist but none holds it; FigureError where there is none."""
     try:
-        return records.newest(name, results)
+        return records.newest(name, results, holds)
+    except LookupError:
+        return None
     except ValueError as error:  # none, every one loaded, a file that is not a record
         raise FigureError(str(error)) from None
 
 
 def figure(name: str, measure: str, page: Path, results: Path = records.RESULTS) -> str:
-    """The text of one figure: median, range and machine, linked (from ``page``) to its record."""
-    path, record = published(name, results)
-    if measure not in record["measures"]:
-        raise FigureError(f"{name}: no measure {measure!r} (it has {', '.join(record['measures'])})")
+    """The text of one figure: median, range and machine, linked (from ``page``) to its record (the newest that
+    has the measure)."""
+    found = published(name, results, lambda record: measure in record["measures"])
+    if found is None:
+        measures = records.newest(name, results)[1]["measures"]
+        raise FigureError(f"{name}: no measure {measure!r} (it has {', '.join(measures)})")
+    path, record = found
     values = record["measures"][measure]
     if values["rounds"] < records.MIN_ROUNDS:
         raise FigureError(f"{name} {measure}: {values['rounds']} rounds; a figure is the median of at least "
@@ -71,10 +76,11 @@ def table_cell(value) -> str:
 
 def record_table(name: str, key: str, page: Path, results: Path = records.RESULTS) -> str:
     """A record's table (``Record.table``) in markdown, then its machine and date, linked to the record."""
-    path, record = published(name, results)
-    table = record.get("notes", {}).get(key)
+    found = published(name, results, lambda record: isinstance(record.get("notes", {}).get(key), dict))
+    table = found[1]["notes"][key] if found else None
     if not isinstance(table, dict) or {"columns", "rows"} - set(table):
         raise FigureError(f"{name}: no table {key!r} in its notes")
+    path, record = found
     lines = ["| " + " | ".join(map(cell, table["columns"])) + " |", "|" + "---|" * len(table["columns"])]
     lines += ["| " + " | ".join(table_cell(value) for value in row) + " |" for row in table["rows"]]
     link = Path(os.path.relpath(path, page.parent)).as_posix()

@@ -604,6 +604,14 @@ def test_a_figure_is_its_commands_newest_record_taken_on_a_quiet_machine(tmp_pat
     a_record(tmp_path, "quiet-scaling", taken="20260501T000000Z", first=3.0)
     rendered = generate.render("<!-- figure:quiet env_step --><!-- end figure -->", page, results=tmp_path)
     assert "[7.20× (7.00–7.40), AMD EPYC, 2 cores](" in rendered and "quiet-20260301T000000Z.json)" in rendered
+    # a newer run of the command that did not measure it (a flag's add-on measure): the newest one that did
+    newer = a_record(tmp_path, "quiet", taken="20260601T000000Z", first=2.0)
+    body = json.loads(newer.read_text())
+    body["measures"] = {"reset": body["measures"].pop("env_step")}
+    newer.write_text(json.dumps(body))
+    assert generate.render("<!-- figure:quiet env_step --><!-- end figure -->", page, results=tmp_path) == rendered
+    assert "quiet-20260601T000000Z.json)" in generate.render("<!-- figure:quiet reset --><!-- end figure -->", page,
+                                                            results=tmp_path)
 
 
 @pytest.mark.parametrize(("kind", "message"), [("loaded", "loaded"), ("short", "3 rounds"), ("missing", "no record"),
