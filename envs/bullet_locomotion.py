@@ -55,6 +55,8 @@ def _fused(a: float, b: float, c: float) -> float:
     sum of two doubles (Dekker 1971), the three added with one rounding (``math.fsum`` is correctly
     rounded); outside Dekker's range, with exact fractions."""
     product = a * b
+    if a == 0.0 or b == 0.0:
+        return product + c  # an exact product: the instruction's one rounding is the sum's
     low, high = _DEKKER
     if not (low < abs(a) < high and low < abs(b) < high and math.isfinite(c)):
         exact = Fraction(a) * Fraction(b) + Fraction(c) if math.isfinite(product) and math.isfinite(c) else 0
