@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Gymnasium's CarRacing against the project's FastCarRacing, measured in one run (issues 9, 21).
+"""Gymnasium's CarRacing against the project's FastCarRacing, measured in one run.
 
     python benchmarks/car_racing.py               # speed, the training loops, the projection
     python benchmarks/car_racing.py --memory      # and the paper's Hebbian run's memory (PSS/USS)
@@ -46,7 +46,7 @@ time). Its record is ``car_racing-against-baseline``.
 Each run writes its record to benchmarks/results/ (benchmarks/record.py): every ratio and rate below
 with its rounds, the projections computed round by round.
 
-Targets (issue 21): env.step >= 8x the stock class (goal 15x), reset >= 2.5x (goal 4x), the Hebbian
+Targets: env.step >= 8x the stock class (goal 15x), reset >= 2.5x (goal 4x), the Hebbian
 training loop per step >= 5x (goal 8x).
 """
 

@@ -13,7 +13,7 @@ and the project's tanh), in one run.
   often it steps down, over every ``--tanh_every``-th float32 of [0, 8] (1: all of them).
 
 Each run writes its record to benchmarks/results/ (benchmarks/record.py): the times per frame and their
-ratio round by round, the differences as notes. (Until issue 41 it also measured ``--fast_conv``, a
+ratio round by round, the differences as notes. (Before 0.1.0 it also measured ``--fast_conv``, a
 compiled pass summing in another order; by then the default was faster per frame, and the flag went.)
 """
 

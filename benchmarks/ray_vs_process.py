@@ -9,7 +9,7 @@ workers, the same noise table and the same theta; then they evaluate the same ge
 tasks (popsize members plus the centre, as a run does) in alternating rounds, so that the machine's
 drift and other load fall on both alike. The first round is a warm-up (the evaluators hand out
 single episodes until they know the episode time) and is not counted. Each round also checks that
-both backends return the same numbers. Target (issue 6): Ray no more than 10 % slower, i.e. the
+both backends return the same numbers. Target: Ray no more than 10 % slower, i.e. the
 ratio of median generation times ray / process <= 1.10.
 
 Ray's own services (raylet, GCS) stay up during the process pool's rounds too; on this 2-core

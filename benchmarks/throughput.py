@@ -22,7 +22,7 @@ others' (``benchmarks/car_racing.py`` compares the loop with Gymnasium's class i
 --baseline DIR (a checkout of another commit: ``git worktree add DIR COMMIT``) measures the ratio with
 today's code and with that checkout's, each in a process of its own that imports its checkout's modules
 and runs this script's measuring code (``Side``), the two taking turns round by round.
-Each run writes its record to benchmarks/results/ (benchmarks/record.py). Targets (issues 2, 3):
+Each run writes its record to benchmarks/results/ (benchmarks/record.py). Targets:
 static MLP on HalfCheetah-v5 >= 0.85, Hebbian ABCD_lr >= 0.70 on HalfCheetah-v5 and >= 0.90 on
 AntBulletEnv-v0 (--threads 1); 1 -> 2 workers on AntBulletEnv-v0 >= 1.8x (--scaling).
 
@@ -30,7 +30,7 @@ For image observations the preprocessing (Atari's frame skip, no-op starts, FIRE
 stack, or pytorch-es's 42 x 42 normalised frames) belongs to the environment's cost, not the
 loop's: the raw side is then the environment as ``make_env`` builds it for the network (every
 wrapper but the action mapping), replaying the actions the episodes chose, resets included. The
-policy's own cost per step (``act``, CPU time) is printed too; issue 13's target for
+policy's own cost per step (``act``, CPU time) is printed too; the target for
 ``--network lstm``: <= 1 ms.
 """
 

@@ -144,10 +144,10 @@ class TrainConfig:
 
 # keys of earlier versions that no setting declares any more: (section, key) -> what a value of it becomes today
 RETIRED: dict[tuple[str, str], Callable[[object], dict]] = {
-    # --fast_conv, the compiled CNN, was removed (issue 41: no faster than the default CNN); such a run goes on, and is
+    # --fast_conv, the compiled CNN, was removed before 0.1.0 (no faster than the default CNN); such a run goes on, and is
     # evaluated, with the default CNN, whose features differ from its by about 1e-5 (docs/speed-carracing.md)
     ("policy", "fast_conv"): lambda value: {},
-    # --tensorboard, a setting of the run until issue 41, is --logger tensorboard (the flag stays, as its alias)
+    # --tensorboard, a setting of the run before 0.1.0, is --logger tensorboard (the flag stays, as its alias)
     ("run", "tensorboard"): lambda value: {"logger": ("tensorboard",)} if value is True else {},
 }
 

@@ -1,5 +1,5 @@
 """OpenCV's ``cv2.resize(frame, size, interpolation=cv2.INTER_AREA)`` of a uint8 RGB frame, value for value,
-compiled and fused with the pixel policy's conversion to float32 planes (issue 21).
+compiled and fused with the pixel policy's conversion to float32 planes.
 
 A downscale by a factor that is not a whole number on both axes (CarRacing's 96 x 96 to 84 x 84) takes
 OpenCV's general area path (``modules/imgproc/src/resize.cpp``): ``computeResizeAreaTab`` lists, per

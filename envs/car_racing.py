@@ -1,4 +1,4 @@
-"""CarRacing whose frames are Gymnasium's, bit for bit, computed several times faster (issue 9).
+"""CarRacing whose frames are Gymnasium's, bit for bit, computed several times faster.
 
 Gymnasium's ``CarRacing`` (O. Klimov; ``gymnasium/envs/box2d/car_racing.py``, v3) draws the whole
 picture at every step, because the observation is that picture. Most of its time goes to
@@ -8,14 +8,14 @@ picture at every step, because the observation is that picture. Most of its time
 none of their numbers) and computes the same picture with less work:
 
 - the car's ``gas`` and ``step`` run ``Car``'s arithmetic without numpy's scalar functions
-  (``_Car``, the same double operations in the same order; issue 21);
+  (``_Car``, the same double operations in the same order);
 - the polygons are transformed in numpy with pygame's own arithmetic (``rotate_like_pygame``), so
   every vertex is the same double as pygame's, and culled with the same inclusive bounds; those
   that pass that generous test but lie wholly beyond one side of the screen are not drawn (pygame
   would clip every one of their pixels away);
 - the playfield polygon, when it covers the screen with its edges out of sight, is a fill of the
   pixel pygame would write;
-- for observations (``state_pixels``), no picture is drawn (issue 21): the road, the grass, the
+- for observations (``state_pixels``), no picture is drawn: the road, the grass, the
   car and the dashboard are recorded as spans by ``envs.pygame_raster`` (pygame's own polygon
   algorithms compiled with numba) in the stock order, flipped as the stock flips its picture, the
   score's pixels are those its blit writes, and ``envs.car_racing_observation`` computes
@@ -34,7 +34,7 @@ none of their numbers) and computes the same picture with less work:
 - the font and the rendered score text are made once instead of at every frame;
 - resets generate the stock track (same doubles, same random draws, same bodies in the same order)
   with its loops compiled by numba and the tile bodies made with fewer wrapper calls
-  (``envs.car_racing_track``, issue 21).
+  (``envs.car_racing_track``).
 
 Observations and ``render()`` frames are ``np.array_equal`` to the stock class's:
 ``tests/test_car_racing.py`` checks the environment side by side with Gymnasium's class and each

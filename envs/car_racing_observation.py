@@ -1,4 +1,4 @@
-"""CarRacing's 96 x 96 observation from spans, without the 1000 x 800 picture (issue 21).
+"""CarRacing's 96 x 96 observation from spans, without the 1000 x 800 picture.
 
 Gymnasium's ``CarRacing`` draws a 1000 x 800 picture at every step and shrinks it with
 ``pygame.transform.smoothscale``; the observation is the shrunk picture. Here the drawing

@@ -1,4 +1,4 @@
-"""Gymnasium's CarRacing track, generated with the same arithmetic at a fraction of the cost (issue 21).
+"""Gymnasium's CarRacing track, generated with the same arithmetic at a fraction of the cost.
 
 Gymnasium's ``CarRacing._create_track`` (O. Klimov; ``gymnasium/envs/box2d/car_racing.py``, v3)
 costs most of a reset: a Python loop of ``math`` calls that steers from checkpoint to checkpoint

@@ -31,7 +31,7 @@ class EnvironmentError_(ValueError):
 
 def register_fast_car_racing() -> None:
     """``CarRacing-v3`` (so the retired ``CarRacing-v0`` too) makes ``envs.car_racing.FastCarRacing``,
-    Gymnasium's class drawn faster with the same frames (issue 9); ``CarRacingStock-v3`` makes
+    Gymnasium's class drawn faster with the same frames; ``CarRacingStock-v3`` makes
     Gymnasium's own class with the same spec, to check any result against it.
 
     Idempotent. Nothing is imported here: the fast class's module (Box2D, pygame, numba kernels)

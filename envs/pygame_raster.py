@@ -1,4 +1,4 @@
-"""pygame-ce's polygon drawing, reproduced pixel for pixel in numba, for the fast CarRacing (issue 9).
+"""pygame-ce's polygon drawing, reproduced pixel for pixel in numba, for the fast CarRacing.
 
 CarRacing draws its picture with three pygame-ce 2.5 functions; this module computes the same
 pixels with the same integer and float32 arithmetic, without crossing the interpreter per polygon:

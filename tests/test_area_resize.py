@@ -1,4 +1,4 @@
-"""The compiled INTER_AREA resize (``envs/area_resize.py``) gives OpenCV's values, bit for bit (issue 21).
+"""The compiled INTER_AREA resize (``envs/area_resize.py``) gives OpenCV's values, bit for bit.
 
 The reference is ``cv2.resize`` itself, followed by the original's conversion
 ``swapaxes(resized.astype(float32) / 255.0, 0, 2)``; the pixel wrapper must give the same floats on

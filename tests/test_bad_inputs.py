@@ -1,5 +1,5 @@
 """Bad input, through the real scripts as processes: flags, TOML, hand-edited config.json, crafted
-checkpoints and journals, outputs aimed at a run's files, and faults (issue 20).
+checkpoints and journals, outputs aimed at a run's files, and faults.
 
 Each case copies one small real run folder (CartPole-v1, popsize 4, 2 generations, observation
 normalisation and Adam, so that every kind of array is in its checkpoint), damages it or aims a command

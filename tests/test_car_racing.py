@@ -1,4 +1,4 @@
-"""The fast CarRacing (issue 9) returns exactly what Gymnasium's does, and the project makes it by default.
+"""The fast CarRacing returns exactly what Gymnasium's does, and the project makes it by default.
 
 Each scenario runs Gymnasium's class (``CarRacingStock-v3``) and ``FastCarRacing`` (``CarRacing-v3``)
 side by side on the real environment, from the same seed with the same actions, and requires the

@@ -1,4 +1,4 @@
-"""What the docs say is what runs (issue 18): every shell command of the code blocks of README.md,
+"""What the docs say is what runs: every shell command of the code blocks of README.md,
 experiments/README.md and docs/*.md runs, for real, with its budget shrunk; the flag tables are what the
 parsers say.
 

@@ -1,4 +1,4 @@
-"""The edges a new user hits (issue 11): printed hints that work as printed, outputs that never
+"""The edges a new user hits: printed hints that work as printed, outputs that never
 replace inputs, resume that never drops a flag, non-finite numbers stopped where they appear, sizes
 and seeds refused up front, headless MuJoCo without a GL library, broken pipes and Ctrl-C.
 

@@ -1,4 +1,4 @@
-"""Options beyond the 2020 algorithm (issue 12): OpenAI's Adam and momentum, weight decay in the
+"""Options beyond the 2020 algorithm: OpenAI's Adam and momentum, weight decay in the
 gradient, observation normalisation, centre evaluation, an episode cap, the shapings, TensorBoard.
 
 Exact values where the math is exact (one step of each optimiser written out by hand, the

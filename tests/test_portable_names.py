@@ -1,4 +1,4 @@
-"""Run folders and files get portable names for any environment id (issue 18 item 4), and the hints
+"""Run folders and files get portable names for any environment id, and the hints
 printed at the end of a run work when pasted in another folder, outside the virtual environment.
 
 A namespaced id (``Tests/Corridor-v0``, registered by ``tests.custom_env_module``, as ``ALE/Pong-v5``

@@ -1,4 +1,4 @@
-"""pytorch-es's algorithm choices as options of the one ES (issue 13, item 3): ``--shaping nes``,
+"""pytorch-es's algorithm choices as options of the one ES: ``--shaping nes``,
 ``--useAdam``, ``--variable_ep_len`` and the centre's rank "k of N+1", with small CartPole budgets.
 """
 

@@ -129,7 +129,7 @@ def test_a_previous_versions_run_resumes_to_its_numbers_and_records_only_its_kin
 
 @pytest.mark.parametrize("fast_conv", [False, True])
 def test_a_run_that_recorded_the_retired_fast_conv_resumes_and_evaluates(fast_conv, tmp_path):
-    """config.json files of the versions with --fast_conv (issue 31, removed by issue 41) record it; such a run
+    """config.json files of the versions with --fast_conv (before 0.1.0) record it; such a run
     is read as today's (the default CNN, for pixels): it evaluates and resumes to today's numbers."""
     run_dir = copy_run("static", tmp_path)
     config = json.loads((run_dir / "config.json").read_text())
@@ -143,7 +143,7 @@ def test_a_run_that_recorded_the_retired_fast_conv_resumes_and_evaluates(fast_co
 
 
 def test_a_run_that_recorded_tensorboard_as_a_run_setting_logs_to_tensorboard():
-    """Until issue 41 TensorBoard was the run's setting ``tensorboard``; such a config.json reads as --logger."""
+    """Before 0.1.0 TensorBoard was the run's setting ``tensorboard``; such a config.json reads as --logger."""
     config = json.loads((RUNS / "static" / "config.json").read_text())
     assert "log" not in config and config["run"]["tensorboard"] is False
     assert TrainConfig.from_dict(config).log.logger == ()

@@ -1,5 +1,5 @@
 """Each strategy solves CartPole-v1 with a small population, through the training script as a user runs it
-(issue 22: "on a fresh clone, each strategy solves CartPole-v1 with a small population").
+(on a fresh clone, each strategy solves CartPole-v1 with a small population).
 
 Solved is the centre's evaluation reaching 475, the mean over episodes on seeds no training episode uses
 (``--eval_every``), at some generation of a run of 30 generations of 16 with each strategy's defaults (OpenAI-ES with

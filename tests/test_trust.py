@@ -1,4 +1,4 @@
-"""What a user is handed stays data, and what a run does stays its own (issue 20), shown working:
+"""What a user is handed stays data, and what a run does stays its own, shown working:
 
 - a genuine CMA-ES journal passes the allowlist and continues exactly as optuna alone continues it,
   and the allowlisted unpickler rebuilds the very optimiser that ``pickle`` does;
