@@ -144,7 +144,7 @@ class TrainConfig:
 
 # keys of earlier versions that no setting declares any more: (section, key) -> what a value of it becomes today
 RETIRED: dict[tuple[str, str], Callable[[object], dict]] = {
-    # --fast_conv, the compiled CNN, was removed before 0.1.0 (no faster than the default CNN); such a run goes on, and is
+    # --fast_conv, the compiled CNN, went before 0.1.0 (no faster than the default CNN); such a run goes on, and is
     # evaluated, with the default CNN, whose features differ from its by about 1e-5 (docs/speed-carracing.md)
     ("policy", "fast_conv"): lambda value: {},
     # --tensorboard, a setting of the run before 0.1.0, is --logger tensorboard (the flag stays, as its alias)
