@@ -73,7 +73,8 @@ def test_refusals_name_the_problem(tmp_path):
     no_folder = launch("--", *TRAINING)
     assert no_folder.returncode == 2 and "give train_static.py a --folder" in no_folder.stderr
     script = launch("--", "evaluate_static.py", "--folder", str(tmp_path / "new"))
-    assert script.returncode == 2 and "must start with one of train_static.py, train_hebb.py" in script.stderr
+    assert script.returncode == 2
+    assert "must start with one of train_hebb.py, train_static.py, got evaluate_static.py" in script.stderr
     bad_flag = launch("--", *TRAINING, "--lr", "-1", "--folder", str(tmp_path / "new"))
     assert bad_flag.returncode == 2 and bad_flag.stderr.startswith("seeds.py: error: --lr must be a number > 0")
     for result in (kind, seed, no_folder, script, bad_flag):
