@@ -39,6 +39,11 @@ def parse(argv: list[str] | None, entry_of: str | None = None, doc: str = "") ->
                         help="train and evaluate one kind; report: compare the kinds over their seeds; curves: "
                              "both kinds' training curves in one figure, <folder of the runs>/<experiment>_curves.png")
     parser.add_argument("--seed", type=seed_value, default=None, help="seed of the training run (default: the file's)")
+    parser.add_argument("--variant", type=non_empty, default=None, metavar="FILE",
+                        help="train the experiment with the changes of FILE: some of the experiment file's sections, "
+                             "each with the settings it changes (experiments/static_ant/*.toml); its runs go to "
+                             f"{paper_runs.RESULTS}/<experiment>_<kind>_<FILE's name>_seed<seed>. In the campaign "
+                             "file, relative to the repository's root")
     parser.add_argument("--popsize", type=positive_int, default=None, help="default: the file's")
     parser.add_argument("--generations", type=positive_int, default=None,
                         help="total generations (default: the file's)")
@@ -65,12 +70,19 @@ def parse(argv: list[str] | None, entry_of: str | None = None, doc: str = "") ->
     parser.add_argument("--status", action="store_true",
                         help="with campaign: how far each run got, and what its generations cost (from metrics.csv)")
     args = parser.parse_args(argv)
+    if args.variant is not None:
+        if entry_of is not None:  # the campaign file is data: its paths are the repository's
+            args.variant = str(ROOT / args.variant)
+        try:
+            paper_runs.variant_flags(args)
+        except ValueError as error:
+            parser.error(str(error))
     if args.budget is not None and args.budget < campaign.MIN_BUDGET:
         parser.error(f"--budget {args.budget:g} leaves no time for a chunk: the training takes seconds to start and "
                      f"a generation to save; give --budget {campaign.MIN_BUDGET} or more (minutes)")
     if args.experiment == "campaign":
-        others = [f"--{name.replace('_', '-')}" for name in ("kind", "seed", "popsize", "generations", "episodes",
-                                                             "folder", "dry_run", "reproduce")
+        others = [f"--{name.replace('_', '-')}" for name in ("kind", "variant", "seed", "popsize", "generations",
+                                                             "episodes", "folder", "dry_run", "reproduce")
                   if getattr(args, name) not in (None, False)]
         if (args.budget is None) == (not args.status) or others:
             parser.error("campaign takes --budget MINUTES (and --threads) or --status, and its runs from "
@@ -84,6 +96,9 @@ def parse(argv: list[str] | None, entry_of: str | None = None, doc: str = "") ->
                      "--reproduce 10")
     elif args.kind is None:
         parser.error(f"{args.experiment} needs a kind: static, hebbian or report")
+    elif args.variant is not None and args.kind not in TRAIN_SCRIPTS:
+        parser.error(f"--variant goes with an experiment and a kind to train: python experiments/paper.py "
+                     f"{args.experiment} static --variant FILE")
     elif args.centre is not None and args.kind != "report":
         parser.error(f"--centre goes with report: python experiments/paper.py {args.experiment} report --centre "
                      f"{args.centre}")

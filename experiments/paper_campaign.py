@@ -33,6 +33,7 @@ from experiments.paper_runs import (
     latest_run,
     load_experiment,
     prepared,
+    run_name,
     shown,
 )
 from experiments.paper_status import progress_page
@@ -96,7 +97,8 @@ def run_chunk(args: argparse.Namespace, deadline: float) -> int:
 
 def write_pages(runs: Path, experiment: str) -> None:
     """At a chunk's end, beside the runs: ``progress.md`` (``progress_page``), the experiment's curves
-    (``curves_figure``) and, once both kinds have an evaluated run, its report (``write_report``), so that
+    (``curves_figure``), for the ant the static ant's study (experiments/stand.py) and, once both kinds have an
+    evaluated run, its report (``write_report``), so that
     what a session commits says how far the campaign got. A file that cannot be written is named; the
     chunk's run stays as it was saved."""
     from es import files
@@ -110,6 +112,9 @@ def write_pages(runs: Path, experiment: str) -> None:
             f"{type(error).__name__}: {error}")
         return
     say(f"campaign: wrote {shown(runs / campaign.PROGRESS)}" + (f" and {shown(written[0])}" if written else ""))
+    if experiment == "ant":  # the static ant's study reads the ant's runs: rewritten with them (its own line says)
+        subprocess.run([sys.executable, str(ROOT / "experiments" / "stand.py"), "--runs", str(runs)], cwd=ROOT,
+                       check=False)
     if not all(evaluated_runs(runs, experiment, kind) for kind in TRAIN_SCRIPTS):
         return
     try:
@@ -140,7 +145,8 @@ def run_queue(args: argparse.Namespace) -> int:
         if deadline - time.monotonic() < 60 * campaign.MIN_BUDGET:
             say("campaign: less than a minute of the budget left; stopping before the next run")
             return 0
-        say(f"campaign: next run: {entry.experiment} {entry.kind} seed {entry.seed if entry.seed is not None else 1}")
+        name = run_name(entry, load_experiment(entry)[1])
+        say(f"campaign: next run: {name.replace('_seed', ' seed ').replace('_', ' ')}")
         code = run_chunk(entry, deadline)
         latest = latest_run(entry_folder(entry))
         if code != 0 or latest is None or not evaluated(latest):

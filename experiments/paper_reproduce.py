@@ -24,6 +24,7 @@ from experiments.paper_runs import (
     overrides,
     run,
     shown,
+    variant_flags,
 )
 
 TIMINGS = ("seconds", "total_seconds")  # the columns of metrics.csv that no two runs share
@@ -47,7 +48,8 @@ def reproduce(args: argparse.Namespace) -> int:
         return 2
     with tempfile.TemporaryDirectory(prefix="reproduce-") as scratch:
         command = [sys.executable, TRAIN_SCRIPTS[args.kind], "--config", str(shown(file)), "--folder", scratch,
-                   *overrides(args, "seed", "popsize", "threads"), "--generations", str(args.reproduce)]
+                   *variant_flags(args), *overrides(args, "seed", "popsize", "threads"),
+                   "--generations", str(args.reproduce)]
         try:
             recorded = files.read_metrics(run_dir / "metrics.csv")[:generations_done(run_dir)]
             if len(recorded) < args.reproduce:

@@ -38,10 +38,55 @@ def shown(path: Path) -> Path:
 
 
 def load_experiment(args: argparse.Namespace) -> tuple[Path, dict]:
-    """The experiment file of ``args`` (experiments/paper/<experiment>_<kind>.toml) and its content."""
+    """The experiment file of ``args`` (experiments/paper/<experiment>_<kind>.toml) and its content, with the
+    changes of a ``--variant`` file over it, section by section."""
     file = FILES / f"{args.experiment}_{args.kind}.toml"
     with open(file, "rb") as handle:
-        return file, tomllib.load(handle)
+        experiment = tomllib.load(handle)
+    for section, values in read_variant(getattr(args, "variant", None)).items():
+        experiment[section] = {**experiment.get(section, {}), **values}
+    return file, experiment
+
+
+VARIANT_SECTIONS = ("es", "policy", "env", "run", "evaluation")  # an experiment file's sections
+
+
+def read_variant(path: str | None) -> dict:
+    """A variant file: some of an experiment file's sections, each with the settings it changes (``{}``: none
+    given). A file that cannot be read or holds something else raises a ValueError naming it."""
+    if path is None:
+        return {}
+    try:
+        with open(path, "rb") as handle:
+            variant = tomllib.load(handle)
+    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
+        raise ValueError(f"--variant {path}: {getattr(error, 'strerror', None) or error}; a variant file is TOML "
+                         "with some of the sections [" + "], [".join(VARIANT_SECTIONS) + "]") from None
+    stray = [name for name, values in variant.items() if name not in VARIANT_SECTIONS or not isinstance(values, dict)]
+    if stray:
+        raise ValueError(f"--variant {path}: {', '.join(stray)} is not a section of an experiment file; valid: "
+                         + ", ".join(VARIANT_SECTIONS))
+    return variant
+
+
+def variant_flags(args: argparse.Namespace) -> list[str]:
+    """The training flags of a ``--variant`` file's changes (its [evaluation] is paper.py's own): ``--sigma 0.05``.
+    The training script checks them as any flag, and a resumed run refuses those it was not made with."""
+    from cli.config import declared
+
+    flags = {item.name: item.flag for item in declared()}
+    words = []
+    for section, values in read_variant(getattr(args, "variant", None)).items():
+        for name, value in values.items() if section != "evaluation" else ():
+            if not flags.get(name):
+                raise ValueError(f"--variant {args.variant}: [{section}] {name} is not a setting a flag can change; "
+                                 "valid: the training script's flags, without the dashes")
+            if isinstance(value, bool):
+                words += [f"--{flags[name]}"] if value else []
+                continue
+            values = value if isinstance(value, list) else [value]
+            words += [f"--{flags[name]}", *(str(item) for item in values)]
+    return words
 
 
 def experiment_folder(args: argparse.Namespace, experiment: dict) -> Path:
@@ -53,9 +98,10 @@ def experiment_folder(args: argparse.Namespace, experiment: dict) -> Path:
 
 def run_name(args: argparse.Namespace, experiment: dict) -> str:
     """The folder name of an experiment's runs with its seed (the file's, where none is given):
-    ``carracing_hebbian_seed1``."""
+    ``carracing_hebbian_seed1``; with a --variant file, its name before the seed: ``ant_static_sigma_seed1``."""
     seed = args.seed if args.seed is not None else experiment["run"]["seed"]
-    return f"{args.experiment}_{args.kind}_seed{seed}"
+    variant = getattr(args, "variant", None)
+    return f"{args.experiment}_{args.kind}{'_' + Path(variant).stem if variant else ''}_seed{seed}"
 
 
 def latest_run(folder: Path) -> Path | None:
@@ -75,7 +121,7 @@ def overrides(args: argparse.Namespace, *names: str) -> list[str]:
 
 
 def continue_words(args: argparse.Namespace) -> str:
-    words = [args.experiment, args.kind, *overrides(args, "seed", "popsize", "generations", "episodes")]
+    words = [args.experiment, args.kind, *overrides(args, "variant", "seed", "popsize", "generations", "episodes")]
     if args.folder:
         words += ["--folder", args.folder]
     return shlex.join(words)
@@ -86,11 +132,10 @@ def train_command(args: argparse.Namespace, file: Path, folder: Path) -> list[st
     for are given again, so the training script refuses them where the run has others."""
     command = [sys.executable, TRAIN_SCRIPTS[args.kind]]
     previous = latest_run(ROOT / folder)  # ``folder``: relative to the repository's root, where the child runs
+    asked = [*variant_flags(args), *overrides(args, "seed", "popsize", "generations", "threads")]
     if previous is not None:
-        return command + ["--resume", str(shown(previous)), *overrides(args, "seed", "popsize", "generations",
-                                                                         "threads")]
-    return command + ["--config", str(shown(file)), "--folder", str(shown(folder)),
-                      *overrides(args, "seed", "popsize", "generations", "threads")]
+        return command + ["--resume", str(shown(previous)), *asked]
+    return command + ["--config", str(shown(file)), "--folder", str(shown(folder)), *asked]
 
 
 def check_training(kind: str, command: list[str]):
@@ -159,10 +204,10 @@ def prepared(args: argparse.Namespace) -> tuple[dict, Path, list[str]] | None:
     """The experiment of ``args``, its folder (relative to the repository's root, or a --folder given) and its
     training command, checked as the training script will check it (``check_training``); None where it is refused,
     the problem said in one line."""
-    file, experiment = load_experiment(args)
-    folder = experiment_folder(args, experiment)
-    command = train_command(args, file, folder)
     try:
+        file, experiment = load_experiment(args)
+        folder = experiment_folder(args, experiment)
+        command = train_command(args, file, folder)
         check_training(args.kind, command)
     except (*USER_ERRORS, ValueError) as error:
         print(f"paper.py: error: {error}", file=sys.stderr)

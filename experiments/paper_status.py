@@ -35,7 +35,9 @@ class CampaignRun:
         run = self.experiment["run"]
         return cost.Planned(
             name=self.name, experiment=self.args.experiment, kind=self.args.kind,
-            group=shlex.join([self.args.experiment, self.args.kind, *overrides(self.args, "popsize", "generations")]),
+            group=shlex.join([self.args.experiment, self.args.kind,
+                              *(["--variant", Path(self.args.variant).stem] if self.args.variant else []),
+                              *overrides(self.args, "popsize", "generations")]),
             seed=self.args.seed if self.args.seed is not None else run["seed"],
             total=self.args.generations if self.args.generations is not None else run["generations"],
             progress=progress)

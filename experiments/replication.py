@@ -539,6 +539,8 @@ def render(runs_root: Path = RUNS, records: Path = ORIGINAL_RECORDS) -> str:
         "(tests/test_car_racing.py steps both side by side; `CarRacingStock-v3` makes Gymnasium's own); the "
         "quadruped's batched class returns pyBullet's (tests/test_bullet_locomotion.py, with an AVX2 CPU's code, "
         "which the batched class computes as on every CPU).",
+        "- **What makes a static ant stand**: the paper's static ant with one setting changed at a time, each "
+        "change over three seeds, against the paper's runs over the same generations ([STATIC_ANT.md](STATIC_ANT.md)).",
         "- **The compute each run took**, from its metrics.csv (wall-clock hours times the workers):",
         *("  " + line for line in compute_lines(runs)), "",
         "### The environment the original ran", "",

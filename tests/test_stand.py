@@ -1,0 +1,135 @@
+"""The static ant's study: variant files of the paper's experiment (``paper.py --variant``), the two episode rules
+the study changes (experiments/static_ant/), and its page (experiments/stand.py), computed from the runs' files as a
+plain loop over metrics.csv gives it.
+"""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from experiments import stand
+
+ROOT = Path(__file__).resolve().parent.parent
+ENV = {**os.environ, "SDL_VIDEODRIVER": "dummy"}
+SIGMA = "experiments/static_ant/sigma.toml"
+
+
+def paper(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, str(ROOT / "experiments" / "paper.py"), *args], cwd=cwd, env=ENV,
+                          capture_output=True, text=True, timeout=300)
+
+
+def test_the_committed_page_is_what_the_files_give(capsys):
+    assert stand.main(["--check"]) == 0, capsys.readouterr().out
+
+
+def test_a_variant_changes_only_its_settings_and_names_its_runs_folder():
+    result = paper("ant", "static", "--variant", SIGMA, "--seed", "2", "--dry-run")
+    assert result.returncode == 0, result.stderr
+    train = result.stdout.splitlines()[0].split()
+    assert train[0] == "$" and train[2:] == [
+        "train_static.py", "--config", "experiments/paper/ant_static.toml", "--folder",
+        "results/paper/ant_static_sigma_seed2", "--sigma", "0.05", "--generations", "30", "--seed", "2"]
+    evaluate = result.stdout.splitlines()[2]
+    assert "--episodes 20 " in evaluate and "results/paper/ant_static_sigma_seed2/" in evaluate
+
+
+def test_the_campaigns_variant_entries_name_files_that_exist():
+    from experiments.paper_args import campaign_entries
+
+    variants = [entry.variant for entry in campaign_entries() if entry.variant is not None]
+    assert len(variants) == 3 * len(list((ROOT / "experiments" / "static_ant").glob("*.toml")))
+    assert all(Path(variant).is_file() for variant in variants)
+
+
+@pytest.mark.parametrize("text, problem", [
+    ("[es\nsigma = 0.05\n", "--variant {file}: "),
+    ("[optimiser]\nsigma = 0.05\n", "--variant {file}: optimiser is not a section of an experiment file; valid: es,"),
+    ("[es]\nnoise_size = 5\n", "--variant {file}: [es] noise_size is not a setting a flag can change"),
+])
+def test_a_bad_variant_file_is_refused_in_one_line(tmp_path, text, problem):
+    file = tmp_path / "bad.toml"
+    file.write_text(text)
+    result = paper("ant", "static", "--variant", str(file), "--dry-run")
+    assert result.returncode == 2 and result.stdout == ""
+    assert len(result.stderr.splitlines()) == 1 and problem.format(file=file) in result.stderr, result.stderr
+
+
+def test_a_variant_goes_with_a_kind_to_train():
+    result = paper("ant", "report", "--variant", SIGMA)
+    assert result.returncode == 2 and "--variant goes with an experiment and a kind to train" in result.stderr
+    result = paper("campaign", "--budget", "5", "--variant", SIGMA)
+    assert result.returncode == 2 and "not --variant" in result.stderr
+
+
+def episode(environment: str) -> tuple[int, int, float]:
+    """One episode of zero actions: (burn-in steps, policy steps, the torso's height after the first step)."""
+    from envs import make_env, quiet_output
+
+    with quiet_output():
+        env, recipe = make_env(environment)
+    env.reset(seed=3)
+    steps, height = 0, None
+    while True:
+        _, _, terminated, truncated, _ = env.step(np.zeros(8))
+        steps += 1
+        height = env.unwrapped.robot.body_xyz[2] if height is None else height
+        if terminated or truncated:
+            env.close()
+            return recipe.burn_in, steps, height
+
+
+def test_the_studys_episode_rules_change_what_they_name_and_nothing_else():
+    # the paper's: 40 zero-action steps drop the torso to its rest below 0.26 m, the end ignored until step 202
+    burn_in, steps, height = episode("AntBulletEnv-v0")
+    assert (burn_in, steps) == (40, 202) and height < 0.26
+    # no grace: the same rest, the end at the first step
+    assert episode("experiments.static_ant.no_grace:AntBulletEnv-v0")[:2] == (40, 1)
+    # no burn-in: the policy's first step is the drop's first (the torso still high), the grace kept
+    burn_in, steps, height = episode("experiments.static_ant.no_burn_in:AntBulletEnv-v0")
+    assert burn_in == 0 and height > 0.7 and steps >= 202
+
+
+def copy_run(source: Path, runs: Path, name: str) -> Path:
+    target = runs / name / source.name
+    target.mkdir(parents=True)
+    for file in ("config.json", "metrics.csv", "checkpoint.npz"):
+        shutil.copy(source / file, target / file)
+    return target
+
+
+def test_the_page_is_a_plain_loop_over_the_runs_files(tmp_path, capsys):
+    from es import files
+
+    source = next((ROOT / "results" / "paper" / "ant_static_seed1").glob("*/checkpoint.npz")).parent
+    copy_run(source, tmp_path, "ant_static_seed1")
+    variant = copy_run(source, tmp_path, "ant_static_one_body_seed3")
+    steps = [[242] * 3 + [1040] * 2, [241, 300, 242, 242, 242], [242] * 5]
+    bodies = ["AntBulletEnv-v0", "AntAsymRightBulletEnv-v0", "AntAsymLeftBulletEnv-v0"]
+    (variant / "evaluation.json").write_text(json.dumps({"environments": [
+        {"environment": body, "steps": body_steps, "mean": 10.0 * index}
+        for index, (body, body_steps) in enumerate(zip(bodies, steps))]}))
+    assert stand.main(["--runs", str(tmp_path)]) == 0
+    page = (tmp_path / stand.PAGE_NAME).read_text()
+    rows = files.read_metrics(source / "metrics.csv")
+    mean = 0.0
+    for row in rows[25:30]:  # generations 26 to 30: 200 candidates and the centre, on 2 bodies, less 40 burn-in steps
+        mean += (float(row["env_steps"]) / (201 * 2) - 40) / 5
+    paper_row = "| paper | none: the paper's settings (the campaign's runs, their first 30 generations) | "
+    assert f"{paper_row}1: {mean:.0f} | {int(mean > stand.STANDS)} of 1 | — |" in page
+    assert f"| 3: {mean:.0f} | {int(mean > stand.STANDS)} of 1 | seed 3: Ant 2/5 (0), AntAsymRight 1/5 (10), " \
+           "AntAsymLeft 0/5 (20) |" in page
+    assert "<!-- runs: paper:1:trained one_body:3:evaluated -->" in page
+    assert (tmp_path / stand.FIGURE_NAME).stat().st_size > 0
+    # the page behind a run evaluated since: exit 0, saying so; a page edited by hand: exit 1
+    (tmp_path / stand.PAGE_NAME).write_text(page.replace("one_body:3:evaluated", "one_body:3:trained"))
+    capsys.readouterr()
+    assert stand.main(["--runs", str(tmp_path), "--check"]) == 0 and "is behind" in capsys.readouterr().out
+    (tmp_path / stand.PAGE_NAME).write_text(page + "edited\n")
+    assert stand.main(["--runs", str(tmp_path), "--check"]) == 1
