@@ -39,10 +39,11 @@ RUNS = ROOT / "results" / "paper"
 VARIANTS = ROOT / "experiments" / "static_ant"
 PAGE_NAME, FIGURE_NAME = "STATIC_ANT.md", "static_ant.png"
 SEEDS = (1, 2, 3)
-GENERATIONS = 30  # each change's run; the paper's runs are read over as many
+GENERATIONS = 20  # each change's run; the paper's runs are read over as many
 LAST = 5  # the generations whose mean episode decides whether a run stands
 FALLS_AT = 202  # policy steps: the original ignores the end of an episode before this step
 STANDS = 250  # mean policy steps per episode above which a population stands
+BUDGET = 12  # core-hours, at most, for the changes' runs (the paper's are the campaign's own)
 
 
 class StudyError(Exception):
@@ -81,6 +82,7 @@ class Run:
     lengths: np.ndarray  # mean policy steps per episode, generations 1.. (at most GENERATIONS)
     burn_in: int
     evaluation: dict | None  # evaluation.json, once evaluated
+    core_hours: float  # its first GENERATIONS generations' wall-clock time times its workers
 
     @property
     def stands(self) -> bool:
@@ -116,12 +118,13 @@ def read_run(arm: Arm, seed: int, runs: Path) -> Run | None:
         episodes = (popsize + 1) * len(environment.split(",")) * config["es"].get("episodes", 1)  # and the centre
         burn_in = burn_in_of(config)
         lengths = np.array([float(row["env_steps"]) / episodes - burn_in for row in rows])
+        core_hours = float(rows[-1]["total_seconds"]) * int(config.get("workers", 1)) / 3600
         evaluation = None
         if arm.name != "paper" and (run_dir / "evaluation.json").exists():
             evaluation = files.read_json(run_dir / "evaluation.json")
     except (OSError, ValueError, KeyError, TypeError) as error:
         raise StudyError(f"{run_dir}: {type(error).__name__}: {error}") from None
-    return Run(arm, seed, run_dir, lengths, burn_in, evaluation)
+    return Run(arm, seed, run_dir, lengths, burn_in, evaluation, core_hours)
 
 
 def stood(run: Run) -> str:
@@ -167,6 +170,7 @@ def render(runs_root: Path) -> tuple[str, list[Run]]:
         standing = f"{sum(run.stands for run in mine)} of {len(mine)}" if mine else "not yet run"
         evaluated = "; ".join(f"seed {run.seed}: {stood(run)}" for run in mine if run.evaluation is not None)
         rows.append(f"| {arm.name} | {arm.change} | {seeds or '—'} | {standing} | {evaluated or '—'} |")
+    spent = sum(run.core_hours for run in found if run.arm.name != "paper")
     pending = [f"{arm.name} seed {seed}" for arm in arms() for seed in SEEDS
                if not any(run.arm == arm and run.seed == seed for run in found)]
     lines = [
@@ -189,9 +193,12 @@ def render(runs_root: Path) -> tuple[str, list[Run]]:
         f"{FALLS_AT} (mean score), by body |",
         "|---|---|---|---|---|", *rows, "",
         f"![the mean episode of each run, generation by generation]({FIGURE_NAME})", "",
-        "Not yet run: " + (", ".join(pending) if pending else "none") + ". Not in this study: the population's "
-        "size and the initial weights' scale (neither is yet a change here), and more generations, which are the "
-        "campaign's own 300-generation runs ([progress.md](progress.md)).", "",
+        f"The changes' runs took {spent:.1f} core-hours (their training's wall-clock time times its workers, from "
+        f"metrics.csv and config.json), of the study's {BUDGET} at most; the paper's runs are the campaign's own.", "",
+        "Not yet run: " + (", ".join(pending) if pending else "none") + ". Not in this study: a larger population "
+        "(twice the paper's 200 doubles a run's cost, beyond the budget) and another scale of the initial weights "
+        "(no setting changes a static network's initial weights). More generations are the campaign's own "
+        "300-generation runs ([progress.md](progress.md)).", "",
         f"<!-- runs: {' '.join(f'{run.arm.name}:{run.seed}:{run.state}' for run in found)} -->", "",
     ]
     return "\n".join(lines), found

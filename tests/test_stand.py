@@ -35,7 +35,7 @@ def test_a_variant_changes_only_its_settings_and_names_its_runs_folder():
     train = result.stdout.splitlines()[0].split()
     assert train[0] == "$" and train[2:] == [
         "train_static.py", "--config", "experiments/paper/ant_static.toml", "--folder",
-        "results/paper/ant_static_sigma_seed2", "--sigma", "0.05", "--generations", "30", "--seed", "2"]
+        "results/paper/ant_static_sigma_seed2", "--sigma", "0.05", "--generations", "20", "--seed", "2"]
     evaluate = result.stdout.splitlines()[2]
     assert "--episodes 20 " in evaluate and "results/paper/ant_static_sigma_seed2/" in evaluate
 
@@ -119,12 +119,15 @@ def test_the_page_is_a_plain_loop_over_the_runs_files(tmp_path, capsys):
     page = (tmp_path / stand.PAGE_NAME).read_text()
     rows = files.read_metrics(source / "metrics.csv")
     mean = 0.0
-    for row in rows[25:30]:  # generations 26 to 30: 200 candidates and the centre, on 2 bodies, less 40 burn-in steps
+    for row in rows[15:20]:  # generations 16 to 20: 200 candidates and the centre, on 2 bodies, less 40 burn-in steps
         mean += (float(row["env_steps"]) / (201 * 2) - 40) / 5
-    paper_row = "| paper | none: the paper's settings (the campaign's runs, their first 30 generations) | "
+    paper_row = "| paper | none: the paper's settings (the campaign's runs, their first 20 generations) | "
     assert f"{paper_row}1: {mean:.0f} | {int(mean > stand.STANDS)} of 1 | — |" in page
     assert f"| 3: {mean:.0f} | {int(mean > stand.STANDS)} of 1 | seed 3: Ant 2/5 (0), AntAsymRight 1/5 (10), " \
            "AntAsymLeft 0/5 (20) |" in page
+    workers = json.loads((source / "config.json").read_text())["workers"]
+    core_hours = float(rows[19]["total_seconds"]) * workers / 3600  # the change's run only, to its generation 20
+    assert f"The changes' runs took {core_hours:.1f} core-hours" in page
     assert "<!-- runs: paper:1:trained one_body:3:evaluated -->" in page
     assert (tmp_path / stand.FIGURE_NAME).stat().st_size > 0
     # the page behind a run evaluated since: exit 0, saying so; a page edited by hand: exit 1
