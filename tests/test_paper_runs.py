@@ -35,16 +35,34 @@ DERIVED = {"noise_size"}  # filled in by the training (the noise table's size), 
 
 
 def experiment_of(run: Path) -> tuple[str, str, int]:
-    """``results/paper/carracing_hebbian_seed1/<run>`` -> ("carracing", "hebbian", 1)."""
-    experiment, kind, seed = run.parent.name.split("_")
-    return experiment, kind, int(seed.removeprefix("seed"))
+    """``results/paper/carracing_hebbian_seed1/<run>`` -> ("carracing", "hebbian", 1); a variant's run
+    (``ant_static_sigma_seed1``) -> ("ant", "static", 1), its variant given by ``variant_of``."""
+    head, seed = run.parent.name.rsplit("_seed", 1)
+    experiment, kind = head.split("_")[:2]
+    return experiment, kind, int(seed)
+
+
+def variant_of(run: Path) -> list[str]:
+    """``--variant FILE`` for a run of a campaign entry with a variant (its file's name in the folder's), else []."""
+    from experiments.paper_args import campaign_entries
+
+    head = run.parent.name.rsplit("_seed", 1)[0]
+    files = {Path(entry.variant).stem: entry.variant for entry in campaign_entries() if entry.variant}
+    name = head.split("_", 2)[2] if head.count("_") >= 2 else None
+    return [] if name is None else ["--variant", str(Path(files[name]).relative_to(ROOT))]
 
 
 def paper_command(run: Path) -> list[str]:
     """The campaign's command for this run (experiments/paper.py's ``train_command`` for a new run), without
     its script."""
+    from argparse import Namespace
+
+    from experiments.paper_runs import variant_flags
+
     experiment, kind, seed = experiment_of(run)
-    return ["--config", f"experiments/paper/{experiment}_{kind}.toml", "--seed", str(seed),
+    variant = variant_of(run)
+    changes = variant_flags(Namespace(variant=str(ROOT / variant[1]))) if variant else []
+    return ["--config", f"experiments/paper/{experiment}_{kind}.toml", *changes, "--seed", str(seed),
             "--folder", str(run.parent.relative_to(ROOT))]
 
 
@@ -126,7 +144,8 @@ def test_the_papers_command_gives_a_committed_runs_first_generations_again(run, 
             pytest.skip(f"commit {label['commit'][:12]} (its {MADE_WITH}) is not in this clone's history")
         subprocess.run(["tar", "-x", "-C", str(tmp_path)], input=archive.stdout, check=True)
         root, count = tmp_path, 1
-    done = paper(experiment, kind, "--seed", str(seed), "--reproduce", str(count), "--threads", "1", root=root)
+    done = paper(experiment, kind, *variant_of(run), "--seed", str(seed), "--reproduce", str(count), "--threads",
+                 "1", root=root)
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
     assert done.stdout.strip().splitlines()[-1] == (
         f"generations 1-{count}: every column but the timings is {run.relative_to(ROOT)}'s")
@@ -153,7 +172,7 @@ def test_the_commands_name_the_repositorys_files_from_its_root_and_paper_runs_fr
     it, so a command a run records (config.json, evaluation.json) runs as written in any checkout; and paper.py
     itself runs from any directory: here a dry run from elsewhere of a finished run (its resume checked against
     its config.json) and of a new seed (its experiment file read)."""
-    run = next(run for run in RUNS if (run / "evaluation.json").exists())
+    run = next(run for run in RUNS if (run / "evaluation.json").exists() and not variant_of(run))
     experiment, kind, seed = experiment_of(run)
     train, evaluate = TRAIN_SCRIPTS[kind], EVALUATE_SCRIPTS[kind]
     new = f"results/paper/{experiment}_{kind}_seed99"
