@@ -128,11 +128,17 @@ def read_run(arm: Arm, seed: int, runs: Path) -> Run | None:
 
 
 def stood(run: Run) -> str:
-    """The final centre's evaluation: on each body, how many episodes lasted past step 202."""
+    """The final centre's evaluation, in the paper's episodes (its burn-in included in ``steps``): on each body, how
+    many episodes lasted past step 202."""
+    from envs.recipes import PYBULLET_ANT
+
     parts = []
     for body in run.evaluation["environments"]:
-        steps = np.asarray(body["steps"]) - run.burn_in
-        name = body["environment"].split(":")[-1].removesuffix("BulletEnv-v0")
+        if ":" in body["environment"]:
+            raise StudyError(f"{run.folder}: evaluated on {body['environment']}, not in the paper's episodes; the "
+                             "study evaluates every change in them ([evaluation] environment left as the paper's)")
+        steps = np.asarray(body["steps"]) - PYBULLET_ANT.burn_in
+        name = body["environment"].removesuffix("BulletEnv-v0")
         parts.append(f"{name} {int((steps > FALLS_AT).sum())}/{len(steps)} ({body['mean']:.0f})")
     return ", ".join(parts)
 
@@ -186,8 +192,9 @@ def render(runs_root: Path) -> tuple[str, list[Run]]:
         f"A run **stands** where its population's mean episode exceeds {STANDS} policy steps over generations "
         f"{GENERATIONS - LAST + 1}–{GENERATIONS}; a population that falls stays within a few steps of {FALLS_AT}. "
         "The mean episode is each generation's environment steps over its episodes (the population and the centre "
-        "on every training body), less the burn-in. An evaluated change adds its final centre's episodes on the "
-        f"paper's three bodies: how many lasted past step {FALLS_AT}, and their mean score.", "",
+        "on every training body), less the burn-in. An evaluated change adds its final centre's episodes in the "
+        f"paper's own (the burn-in and the grace included) on its three bodies: how many lasted past step {FALLS_AT}, "
+        "and their mean score.", "",
         "| change | in words | mean episode, generations "
         f"{GENERATIONS - LAST + 1}–{GENERATIONS}, by seed | runs that stand | final centre: episodes past step "
         f"{FALLS_AT} (mean score), by body |",

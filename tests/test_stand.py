@@ -38,6 +38,12 @@ def test_a_variant_changes_only_its_settings_and_names_its_runs_folder():
         "results/paper/ant_static_sigma_seed2", "--sigma", "0.05", "--generations", "20", "--seed", "2"]
     evaluate = result.stdout.splitlines()[2]
     assert "--episodes 20 " in evaluate and "results/paper/ant_static_sigma_seed2/" in evaluate
+    # a change of the episode's rules trains in them, and is evaluated in the paper's episodes
+    result = paper("ant", "static", "--variant", "experiments/static_ant/no_burn_in.toml", "--dry-run")
+    train, _, evaluate, _ = result.stdout.splitlines()
+    assert ("--environment experiments.static_ant.no_burn_in:AntBulletEnv-v0,"
+            "experiments.static_ant.no_burn_in:AntAsymRightBulletEnv-v0 ") in train
+    assert "--environment AntBulletEnv-v0,AntAsymRightBulletEnv-v0,AntAsymLeftBulletEnv-v0 " in evaluate
 
 
 def test_the_campaigns_variant_entries_name_files_that_exist():
