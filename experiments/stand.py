@@ -173,10 +173,11 @@ def render(runs_root: Path) -> tuple[str, list[Run]]:
     for arm in arms():
         mine = [run for run in found if run.arm == arm]
         seeds = ", ".join(f"{run.seed}: {run.lengths[GENERATIONS - LAST:GENERATIONS].mean():.0f}" for run in mine)
-        standing = f"{sum(run.stands for run in mine)} of {len(mine)}" if mine else "not yet run"
+        count = f"{sum(run.stands for run in mine)} of {len(mine)}" if mine else "not yet run"
         evaluated = "; ".join(f"seed {run.seed}: {stood(run)}" for run in mine if run.evaluation is not None)
-        rows.append(f"| {arm.name} | {arm.change} | {seeds or '—'} | {standing} | {evaluated or '—'} |")
+        rows.append(f"| {arm.name} | {arm.change} | {seeds or '—'} | {count} | {evaluated or '—'} |")
     spent = sum(run.core_hours for run in found if run.arm.name != "paper")
+    standing = {arm.name: sum(run.stands for run in found if run.arm == arm) for arm in arms()}
     pending = [f"{arm.name} seed {seed}" for arm in arms() for seed in SEEDS
                if not any(run.arm == arm and run.seed == seed for run in found)]
     lines = [
@@ -195,6 +196,7 @@ def render(runs_root: Path) -> tuple[str, list[Run]]:
         "on every training body), less the burn-in. An evaluated change adds its final centre's episodes in the "
         f"paper's own (the burn-in and the grace included) on its three bodies: how many lasted past step {FALLS_AT}, "
         "and their mean score.", "",
+        "**The result**: " + result(standing, len(pending)), "",
         "| change | in words | mean episode, generations "
         f"{GENERATIONS - LAST + 1}–{GENERATIONS}, by seed | runs that stand | final centre: episodes past step "
         f"{FALLS_AT} (mean score), by body |",
@@ -209,6 +211,20 @@ def render(runs_root: Path) -> tuple[str, list[Run]]:
         f"<!-- runs: {' '.join(f'{run.arm.name}:{run.seed}:{run.state}' for run in found)} -->", "",
     ]
     return "\n".join(lines), found
+
+
+def result(standing: dict[str, int], to_come: int) -> str:
+    """The study's answer in one sentence, once every run is in: the changes that let more seeds stand than
+    the paper's settings do."""
+    if to_come:
+        return f"not yet decided, {to_come} of its {len(standing) * len(SEEDS)} runs to come."
+    paper = standing["paper"]
+    better = [name for name, count in standing.items() if name != "paper" and count > paper]
+    if not better:
+        return (f"none of the changes lets more of its seeds stand than the paper's settings do ({paper} of "
+                f"{len(SEEDS)}).")
+    return (", ".join(f"{name} ({standing[name]} of {len(SEEDS)})" for name in better) + " let more seeds stand "
+            f"than the paper's settings ({paper} of {len(SEEDS)}).")
 
 
 def covered(text: str) -> set[str]:

@@ -142,3 +142,11 @@ def test_the_page_is_a_plain_loop_over_the_runs_files(tmp_path, capsys):
     assert stand.main(["--runs", str(tmp_path), "--check"]) == 0 and "is behind" in capsys.readouterr().out
     (tmp_path / stand.PAGE_NAME).write_text(page + "edited\n")
     assert stand.main(["--runs", str(tmp_path), "--check"]) == 1
+
+
+def test_the_result_names_the_changes_that_let_more_seeds_stand():
+    assert stand.result({"paper": 1, "sigma": 2}, 3) == "not yet decided, 3 of its 6 runs to come."
+    assert stand.result({"paper": 1, "sigma": 1, "one_body": 0}, 0) == (
+        "none of the changes lets more of its seeds stand than the paper's settings do (1 of 3).")
+    assert stand.result({"paper": 1, "sigma": 2, "one_body": 3, "no_grace": 0}, 0) == (
+        "sigma (2 of 3), one_body (3 of 3) let more seeds stand than the paper's settings (1 of 3).")
