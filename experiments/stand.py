@@ -139,7 +139,7 @@ def stood(run: Run) -> str:
                              "study evaluates every change in them ([evaluation] environment left as the paper's)")
         steps = np.asarray(body["steps"]) - PYBULLET_ANT.burn_in
         name = body["environment"].removesuffix("BulletEnv-v0")
-        parts.append(f"{name} {int((steps > FALLS_AT).sum())}/{len(steps)} ({body['mean']:.0f})")
+        parts.append(f"{name} {int((steps > FALLS_AT).sum())}/{len(steps)} ({body['mean']:.1f})")
     return ", ".join(parts)
 
 

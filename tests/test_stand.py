@@ -129,8 +129,8 @@ def test_the_page_is_a_plain_loop_over_the_runs_files(tmp_path, capsys):
         mean += (float(row["env_steps"]) / (201 * 2) - 40) / 5
     paper_row = "| paper | none: the paper's settings (the campaign's runs, their first 20 generations) | "
     assert f"{paper_row}1: {mean:.0f} | {int(mean > stand.STANDS)} of 1 | — |" in page
-    assert f"| 3: {mean:.0f} | {int(mean > stand.STANDS)} of 1 | seed 3: Ant 2/5 (0), AntAsymRight 1/5 (10), " \
-           "AntAsymLeft 0/5 (20) |" in page
+    assert f"| 3: {mean:.0f} | {int(mean > stand.STANDS)} of 1 | seed 3: Ant 2/5 (0.0), AntAsymRight 1/5 (10.0), " \
+           "AntAsymLeft 0/5 (20.0) |" in page
     workers = json.loads((source / "config.json").read_text())["workers"]
     core_hours = float(rows[19]["total_seconds"]) * workers / 3600  # the change's run only, to its generation 20
     assert f"The changes' runs took {core_hours:.1f} core-hours" in page
