@@ -10,7 +10,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from experiments import stand
@@ -74,21 +73,34 @@ def test_a_variant_goes_with_a_kind_to_train():
     assert result.returncode == 2 and "not --variant" in result.stderr
 
 
-def episode(environment: str) -> tuple[int, int, float]:
-    """One episode of zero actions: (burn-in steps, policy steps, the torso's height after the first step)."""
-    from envs import make_env, quiet_output
+EPISODE = """
+import json, sys
 
-    with quiet_output():
-        env, recipe = make_env(environment)
-    env.reset(seed=3)
-    steps, height = 0, None
-    while True:
-        _, _, terminated, truncated, _ = env.step(np.zeros(8))
-        steps += 1
-        height = env.unwrapped.robot.body_xyz[2] if height is None else height
-        if terminated or truncated:
-            env.close()
-            return recipe.burn_in, steps, height
+import numpy as np
+
+from envs import make_env, quiet_output
+with quiet_output():
+    env, recipe = make_env(sys.argv[1])
+env.reset(seed=3)
+steps, height = 0, None
+while True:
+    _, _, terminated, truncated, _ = env.step(np.zeros(8))
+    steps += 1
+    height = float(env.unwrapped.robot.body_xyz[2]) if height is None else height
+    if terminated or truncated:
+        break
+print(json.dumps([recipe.burn_in, steps, height]))
+"""
+
+
+def episode(environment: str) -> tuple[int, int, float]:
+    """One episode of zero actions: (burn-in steps, policy steps, the torso's height after the first step). In a
+    process of its own: a recipe module, once imported, gives its recipe to every ant its process makes."""
+    done = subprocess.run([sys.executable, "-c", EPISODE, environment], cwd=ROOT, env=ENV, capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    burn_in, steps, height = json.loads(done.stdout.strip().splitlines()[-1])
+    return burn_in, steps, height
 
 
 def test_the_studys_episode_rules_change_what_they_name_and_nothing_else():
