@@ -76,11 +76,15 @@ def table_cell(value) -> str:
 
 def record_table(name: str, key: str, page: Path, results: Path = records.RESULTS) -> str:
     """A record's table (``Record.table``) in markdown, then its machine and date, linked to the record."""
-    found = published(name, results, lambda record: isinstance(record.get("notes", {}).get(key), dict))
-    table = found[1]["notes"][key] if found else None
-    if not isinstance(table, dict) or {"columns", "rows"} - set(table):
+    def holds(record: dict) -> bool:
+        table = record.get("notes", {}).get(key)
+        return isinstance(table, dict) and {"columns", "rows"} <= set(table)
+
+    found = published(name, results, holds)
+    if found is None:
         raise FigureError(f"{name}: no table {key!r} in its notes")
     path, record = found
+    table = record["notes"][key]
     lines = ["| " + " | ".join(map(cell, table["columns"])) + " |", "|" + "---|" * len(table["columns"])]
     lines += ["| " + " | ".join(table_cell(value) for value in row) + " |" for row in table["rows"]]
     link = Path(os.path.relpath(path, page.parent)).as_posix()

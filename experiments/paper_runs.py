@@ -84,8 +84,7 @@ def variant_flags(args: argparse.Namespace) -> list[str]:
             if isinstance(value, bool):
                 words += [f"--{flags[name]}"] if value else []
                 continue
-            values = value if isinstance(value, list) else [value]
-            words += [f"--{flags[name]}", *(str(item) for item in values)]
+            words += [f"--{flags[name]}", *(str(item) for item in (value if isinstance(value, list) else [value]))]
     return words
 
 

@@ -49,6 +49,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:  # run as a script
     sys.path.insert(0, str(ROOT))
+from experiments.pages import covered, runs_line, settle  # noqa: E402  (after the repository's root is on the path)
+
 RUNS = ROOT / "results" / "paper"
 PAGE_NAME = "REPLICATION.md"
 ORIGINAL_RECORDS = ROOT / "results" / "original_ant"
@@ -532,7 +534,7 @@ def render(runs_root: Path = RUNS, records: Path = ORIGINAL_RECORDS) -> str:
         "[experiments/replication.py](../../experiments/replication.py).", "",
         "## The runs", "",
         *runs_table(runs, page), "",
-        f"<!-- runs: {' '.join(run.name for run in runs)} -->", "",
+        runs_line(run.name for run in runs), "",
         "## The checks behind it", "",
         "- **Gymnasium's and pyBullet's own classes give the same episodes.** The CarRacing this tool steps is a "
         "faster class that returns Gymnasium's `CarRacing-v3` observations, rewards and ends bit for bit "
@@ -552,12 +554,6 @@ def render(runs_root: Path = RUNS, records: Path = ORIGINAL_RECORDS) -> str:
     return "\n".join(lines)
 
 
-def covered(text: str) -> set[str]:
-    """The runs a page was written from (its ``<!-- runs: ... -->`` line)."""
-    match = re.search(r"<!-- runs: (.*?) -->", text)
-    return set(match[1].split()) if match else set()
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="experiments/replication.py", description=__doc__.splitlines()[0])
     parser.add_argument("--check", action="store_true",
@@ -575,21 +571,17 @@ def main(argv: list[str] | None = None) -> int:
     except ReplicationError as error:
         print(f"{parser.prog}: error: {error}", file=sys.stderr)
         return 2
-    current = page.read_text() if page.is_file() else None
-    if not args.check:
-        if current != generated:
-            page.write_text(generated)
-            print(f"wrote {page}")
-        return 0
-    if current == generated:
-        return 0
-    newer = covered(generated) - covered(current or "")
-    if current is not None and newer and covered(current) <= covered(generated):
-        print(f"{page} is behind the runs evaluated since it was written ({', '.join(sorted(newer))}); "
-              "python experiments/replication.py catches it up")
-        return 0
-    print(f"{page} differs from what the runs' files give; python experiments/replication.py rewrites it")
-    return 1
+    def behind(current: str) -> str | None:
+        newer = covered(generated) - covered(current)
+        return (f"the runs evaluated since it was written ({', '.join(sorted(newer))})"
+                if newer and covered(current) <= covered(generated) else None)
+
+    def write() -> None:
+        page.write_text(generated)
+        print(f"wrote {page}")
+
+    return settle(page, generated, args.check, "python experiments/replication.py", write, behind)
+
 
 if __name__ == "__main__":
     sys.exit(main())

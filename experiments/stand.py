@@ -35,6 +35,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:  # run as a script
     sys.path.insert(0, str(ROOT))
+from experiments.pages import covered, runs_line, settle  # noqa: E402  (after the repository's root is on the path)
+
 RUNS = ROOT / "results" / "paper"
 VARIANTS = ROOT / "experiments" / "static_ant"
 PAGE_NAME, FIGURE_NAME = "STATIC_ANT.md", "static_ant.png"
@@ -208,7 +210,7 @@ def render(runs_root: Path) -> tuple[str, list[Run]]:
         "(twice the paper's 200 doubles a run's cost, beyond the budget) and another scale of the initial weights "
         "(no setting changes a static network's initial weights). More generations are the campaign's own "
         "300-generation runs ([progress.md](progress.md)).", "",
-        f"<!-- runs: {' '.join(f'{run.arm.name}:{run.seed}:{run.state}' for run in found)} -->", "",
+        runs_line(f"{run.arm.name}:{run.seed}:{run.state}" for run in found), "",
     ]
     return "\n".join(lines), found
 
@@ -227,11 +229,6 @@ def result(standing: dict[str, int], to_come: int) -> str:
             f"than the paper's settings ({paper} of {len(SEEDS)}).")
 
 
-def covered(text: str) -> set[str]:
-    match = re.search(r"<!-- runs: (.*?) -->", text)
-    return set(match[1].split()) if match else set()
-
-
 def behind(current: str, generated: str) -> bool:
     """Whether ``current`` lacks only runs trained or evaluated since (each of its runs is in ``generated``,
     or is there evaluated now)."""
@@ -246,29 +243,23 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--runs", type=Path, default=RUNS, metavar="DIR",
                         help=f"the campaign's folder; the page is DIR/{PAGE_NAME} (default: results/paper)")
     args = parser.parse_args(argv)
-    page = args.runs / PAGE_NAME
+    page, picture = args.runs / PAGE_NAME, args.runs / FIGURE_NAME
     try:
         if not args.runs.is_dir():
             raise StudyError(f"--runs {args.runs}: not a folder")
         generated, found = render(args.runs)
-        current = page.read_text() if page.is_file() else None
-        if not args.check:
-            if current != generated or not (args.runs / FIGURE_NAME).exists():
-                figure(found, args.runs / FIGURE_NAME)
-                page.write_text(generated)
-                print(f"wrote {page} and {args.runs / FIGURE_NAME}")
-            return 0
+
+        def write() -> None:
+            figure(found, picture)
+            page.write_text(generated)
+            print(f"wrote {page} and {picture}")
+
+        return settle(page, generated, args.check, "python experiments/stand.py", write,
+                      lambda current: "the runs trained or evaluated since it was written"
+                      if behind(current, generated) else None, outputs=(picture,))
     except (StudyError, OSError) as error:
         print(f"{parser.prog}: error: {error}", file=sys.stderr)
         return 2
-    if current == generated:
-        return 0
-    if current is not None and behind(current, generated):
-        print(f"{page} is behind the runs trained or evaluated since it was written; python "
-              "experiments/stand.py catches it up")
-        return 0
-    print(f"{page} differs from what the runs' files give; python experiments/stand.py rewrites it")
-    return 1
 
 
 if __name__ == "__main__":
