@@ -1,0 +1,160 @@
+#!/usr/bin/env python
+"""The original's ES settings against the modern options, one seed, the same budget: the tables of
+docs/modern-es.md.
+
+    python benchmarks/modern_es.py --environment HalfCheetah-v5 --popsize 48 --generations 100
+
+Each setting is one ``train_static.py`` run (``--threads 1``, ``--seed``, the budget given here), in
+``<--folder>/<environment>/<setting>``:
+
+- ``faithful``: the original's defaults (SGD, lr 0.2, σ 0.1, decay 0.995, rank_std, no normalisation);
+- ``modern``: ``MODERN``, the common choices of modern ES code (Adam, lr 0.01, σ 0.02, observation
+  normalisation, L2 0.005), untuned.
+
+Both evaluate their centre every 5 generations on 10 episodes (``--eval_every 5 --eval_episodes 10``), a log
+that no update reads. A run already complete is not trained again; one cut short resumes. The final centre is
+then evaluated by ``evaluate_static.py`` on ``--episodes`` episodes per body from seed 2**31, seeds no training
+episode uses. The record (``modern_es-<environment>``, not timed: a seeded run's returns are the same at any
+load) holds, per setting and body, the return and, for ants, the distance walked forward, each as mean ± std
+over the episodes, and the run's own last centre evaluation.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+from record import ROOT, Record, add_results_flag
+
+from es import files
+
+CENTRE_EVALUATION = ["--eval_every", "5", "--eval_episodes", "10"]
+MODERN = ["--optimizer", "adam", "--lr", "0.01", "--sigma", "0.02", "--obs_norm", "--l2coeff", "0.005"]
+SETTINGS = {"faithful": [], "modern": MODERN}
+HELD_OUT = 2**31  # the first evaluation seed: seeds from here on are the centre evaluation's, never a training's
+
+
+def run_folder(args: argparse.Namespace, setting: str) -> Path:
+    return args.folder / args.environment.replace(",", "+") / setting
+
+
+def newest_run(folder: Path) -> Path | None:
+    runs = sorted(path.parent for path in folder.glob("*/metrics.csv"))
+    return runs[-1] if runs else None
+
+
+def generations_done(run: Path | None) -> int:
+    """The generations a run has saved: its metrics.csv's rows."""
+    return 0 if run is None else max(len((run / "metrics.csv").read_text().splitlines()) - 1, 0)
+
+
+def train(args: argparse.Namespace, setting: str) -> Path:
+    """The setting's run, trained (or resumed) to ``--generations``; SystemExit with the script's code if it
+    fails."""
+    folder = run_folder(args, setting)
+    run = newest_run(folder)
+    if run is not None and generations_done(run) >= args.generations:
+        print(f"{setting}: {run} is complete", flush=True)
+        return run
+    start = ["--resume", str(run)] if run is not None else [
+        "--environment", args.environment, "--popsize", str(args.popsize), "--seed", str(args.seed),
+        "--folder", str(folder), *CENTRE_EVALUATION, *SETTINGS[setting]]
+    command = [sys.executable, str(ROOT / "train_static.py"), *start, "--generations", str(args.generations),
+               "--threads", "1", "--print_every", "10"]
+    print(f"$ python train_static.py {' '.join(command[2:])}", flush=True)
+    code = subprocess.run(command).returncode
+    run = newest_run(folder)
+    if code != 0 or run is None or generations_done(run) < args.generations:
+        print(f"modern_es.py: error: the {setting} run stopped (exit code {code}); the same command resumes it",
+              file=sys.stderr)
+        raise SystemExit(2 if code == 2 else 1)
+    return run
+
+
+def evaluate(args: argparse.Namespace, run: Path) -> dict:
+    """``evaluate_static.py``'s statistics of the run's final centre (its JSON), written beside the run."""
+    out = run.parent / f"evaluation-{run.name}.json"
+    command = [sys.executable, str(ROOT / "evaluate_static.py"), "--path_weights", str(run), "--episodes",
+               str(args.episodes), "--seed", str(HELD_OUT), "--json", str(out)]
+    print(f"$ python evaluate_static.py {' '.join(command[2:])}", flush=True)
+    if subprocess.run(command).returncode != 0:
+        print("modern_es.py: error: the evaluation failed", file=sys.stderr)
+        raise SystemExit(1)
+    return json.loads(out.read_text())
+
+
+def plus_minus(mean: float, std: float, unit: str = "") -> str:
+    return f"{mean:,.1f} ± {std:,.1f}{unit}"
+
+
+def centre_log(run: Path) -> str:
+    """The run's last centre evaluation (metrics.csv's last row with one), mean ± std over its episodes."""
+    lines = (run / "metrics.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    for line in reversed(lines[1:]):
+        values = dict(zip(header, line.split(","), strict=True))
+        mean, std = float(values["center_eval_mean"]), float(values["center_eval_std"])
+        if not math.isnan(mean):
+            return f"{plus_minus(mean, std)} (generation {values['generation']})"
+    return "–"
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse(argv)
+    record = Record(f"modern_es-{args.environment.replace(',', '+')}", timed=False)
+    rows, columns = [], None
+    for setting in SETTINGS:
+        run = train(args, setting)
+        evaluation = evaluate(args, run)
+        cells, heads = [], []
+        for body in evaluation["environments"]:
+            name = body["environment"]
+            heads.append(f"{name}: return")
+            cells.append(plus_minus(body["mean"], body["std"]))
+            record.add(f"{setting}_{name}_return", f"{setting} settings, after {args.generations} generations: "
+                       f"{name}'s return, one value per evaluation episode", "", body["returns"])
+            if "forward" in body:
+                heads.append(f"{name}: forward x")
+                cells.append(plus_minus(body["forward_mean"], body["forward_std"], " m"))
+        columns = columns or ["settings", *heads, "the run's own last centre evaluation (10 episodes)"]
+        rows.append([setting, *cells, centre_log(run)])
+        record.note(f"{setting}_run", {"folder": str(run), "command": files.read_json(run / "config.json").get(
+            "command"), "mean_return": statistics.fmean(b["mean"] for b in evaluation["environments"])})
+    record.table("results", columns, rows)
+    record.note("protocol", {"environment": args.environment, "popsize": args.popsize,
+                             "generations": args.generations, "seed": args.seed, "episodes": args.episodes,
+                             "first_evaluation_seed": HELD_OUT, "settings": SETTINGS,
+                             "centre_evaluation": CENTRE_EVALUATION})
+    record.write(args.results)
+    return 0
+
+
+def parse(argv: list[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser.add_argument("--environment", default="HalfCheetah-v5",
+                        help="a Gymnasium id, or several separated by commas, as train_static.py takes them")
+    parser.add_argument("--popsize", type=int, default=48)
+    parser.add_argument("--generations", type=int, default=100)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--episodes", type=int, default=10, help="evaluation episodes per body")
+    parser.add_argument("--folder", type=Path, default=Path("runs/modern_es"),
+                        help="where the runs go: <FOLDER>/<environment>/<setting> (default: runs/modern_es)")
+    add_results_flag(parser)
+    args = parser.parse_args(argv)
+    bounds = (("--popsize", args.popsize, 2, 100_000), ("--generations", args.generations, 1, 100_000),
+              ("--seed", args.seed, 0, 2**31 - 2), ("--episodes", args.episodes, 1, 10_000))
+    for flag, value, low, high in bounds:
+        if not low <= value <= high:
+            parser.error(f"{flag} {value}: must be from {low} to {high}")
+    return args
+
+
+if __name__ == "__main__":
+    sys.exit(main())
