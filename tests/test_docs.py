@@ -58,7 +58,8 @@ number = generate.records_files.number
 # extra -> (modules it installs, how to tell a command needs it)
 EXTRAS = {
     "reservoirs": (("reservoirpy", "stable_baselines3", "optuna", "cmaes"),
-                   lambda script, args: script.startswith("scripts/") or "--reservoir" in args),
+                   lambda script, args: script.startswith("scripts/") or "--reservoir" in args
+                   or script.endswith("benchmarks/reservoir_front.py")),
     "ray": (("ray",), lambda script, args: "ray" in args or "--ray" in args or "ray_vs_process" in script),
     "atari": (("ale_py",), lambda script, args: any(re.search(r"ALE/|NoFrameskip|Deterministic-v|pong", word)
                                                      for word in args)),
@@ -67,9 +68,10 @@ EXTRAS = {
                     or script.startswith("scripts/test")),
     "wandb": (("wandb",), lambda script, args: "wandb" in logged(args)),
     "mlflow": (("mlflow", "sqlalchemy", "alembic"), lambda script, args: "mlflow" in logged(args)),
-    "strategies": (("cmaes",), lambda script, args: "cma_es" in args or "sep_cma_es" in args),
+    "strategies": (("cmaes",), lambda script, args: any("cma_es" in word for word in args)
+                   or (script.endswith("strategies.py") and "--strategies" not in args)),  # its defaults: sep_cma_es
     "stats": (("rliable", "arch", "pandas"),
-              lambda script, args: script.endswith("report_runs.py")
+              lambda script, args: script.endswith(("report_runs.py", "benchmarks/strategies.py"))
               or (script.endswith("paper.py") and "report" in args)),
     "bench": (("evotorch",), lambda script, args: "evotorch" in Path(script).name),
 }

@@ -166,24 +166,37 @@ def succeeded(command: list[str], dry_run: bool) -> None:
         sys.exit(code)
 
 
-def table(results: dict[str, dict[int, dict]], seeds: list[int]) -> str:
-    """Markdown: one row per arm, the mean return of each seed's run (over all evaluation environments
-    and episodes) and the mean over seeds; with several environments, each one's mean over seeds too."""
+def means(results: dict[str, dict[int, dict]], seeds: list[int]) -> list[tuple[str, list[float], float, list[float]]]:
+    """Per arm: the mean return of each seed's run (over all evaluation environments and episodes), their mean
+    over seeds, and with several environments each one's mean over seeds (else none)."""
+    count = len(environment_names(results))
+    found = []
+    for arm, runs in results.items():
+        per_seed = [sum(sum(e["returns"]) for e in runs[seed]["environments"])
+                    / sum(len(e["returns"]) for e in runs[seed]["environments"]) for seed in seeds]
+        per_env = [sum(sum(runs[seed]["environments"][i]["returns"]) / len(runs[seed]["environments"][i]["returns"])
+                       for seed in seeds) / len(seeds) for i in range(count)]
+        found.append((arm, per_seed, sum(per_seed) / len(seeds), per_env))
+    return found
+
+
+def environment_names(results: dict[str, dict[int, dict]]) -> list[str]:
+    """The evaluation environments, where there are several (a column each)."""
     environments = next(iter(next(iter(results.values())).values()))["environments"]
-    names = [environment["env_id"] for environment in environments] if len(environments) > 1 else []
+    return [environment["env_id"] for environment in environments] if len(environments) > 1 else []
+
+
+def table(results: dict[str, dict[int, dict]], seeds: list[int]) -> str:
+    """Markdown: one row per arm, the mean return of each seed's run and the mean over seeds (``means``)."""
+    names = environment_names(results)
 
     def row(cells: list[str]) -> str:
         return "| " + " | ".join(cells) + " |"
 
     lines = [row(["arm", *(f"seed {seed}" for seed in seeds), "mean", *names]),
              row(["---"] * (len(seeds) + 2 + len(names)))]
-    for arm, runs in results.items():
-        per_seed = [sum(sum(e["returns"]) for e in runs[seed]["environments"])
-                    / sum(len(e["returns"]) for e in runs[seed]["environments"]) for seed in seeds]
-        per_env = [sum(sum(runs[seed]["environments"][i]["returns"]) / len(runs[seed]["environments"][i]["returns"])
-                       for seed in seeds) / len(seeds) for i in range(len(names))]
-        lines.append(row([arm, *(f"{value:.1f}" for value in per_seed), f"**{sum(per_seed) / len(seeds):.1f}**",
-                          *(f"{value:.1f}" for value in per_env)]))
+    lines += [row([arm, *(f"{value:.1f}" for value in per_seed), f"**{mean:.1f}**",
+                   *(f"{value:.1f}" for value in per_env)]) for arm, per_seed, mean, per_env in means(results, seeds)]
     return "\n".join(lines)
 
 

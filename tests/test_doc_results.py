@@ -1,0 +1,141 @@
+"""The scripts behind the training results of docs/strategies.md and docs/modern-es.md (benchmarks/strategies.py,
+benchmarks/modern_es.py), with tiny budgets on real environments: their records hold what the runs' own files
+and the project's statistics give, and the same command again trains nothing and writes the same tables."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.extras import need
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def run(script: str, *args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, str(ROOT / "benchmarks" / script), *args], cwd=cwd, capture_output=True,
+                          text=True, timeout=600)
+
+
+def record_of(folder: Path) -> dict:
+    [path] = folder.glob("*.json")
+    return json.loads(path.read_text())
+
+
+def run_files(folder: Path) -> dict[Path, int]:
+    return {path: path.stat().st_mtime_ns for path in sorted(folder.rglob("*")) if path.is_file()
+            and "launch" not in path.name}
+
+
+def test_strategies_record_is_the_runs_final_scores_and_their_statistics(tmp_path):
+    need("stats")
+    from report import stats
+
+    args = ["--environment", "CartPole-v1", "--strategies", "openai,pgpe", "--popsize", "4", "--generations", "2",
+            "--seeds", "2", "--jobs", "1"]
+    first = run("strategies.py", *args, "--results", str(tmp_path / "first"), cwd=tmp_path)
+    assert first.returncode == 0, first.stderr
+    record = record_of(tmp_path / "first")
+    assert record["timed"] is False and record["loaded"] is False
+    runs = tmp_path / "runs" / "strategies" / "CartPole-v1"
+    assert sorted(path.name for path in runs.iterdir()) == ["hebbian_openai", "hebbian_pgpe", "static_openai",
+                                                            "static_pgpe"]
+    for kind in ("static", "hebbian"):
+        scores = {}
+        for strategy in ("openai", "pgpe"):
+            found = stats.collect([f"{strategy}={runs / f'{kind}_{strategy}'}"], "final")[strategy]
+            scores[strategy] = [found[run] for run in sorted(found, key=lambda run: run.parent.name)]
+            assert record["measures"][f"{kind}_{strategy}"]["values"] == scores[strategy]
+        table = record["notes"][kind]
+        [summary_openai, summary_pgpe] = stats.summarise(scores)
+        [pgpe_over_openai] = [p for p in stats.improvements(scores) if p.x == "pgpe"]
+        assert [row[0] for row in table["rows"]] == ["openai", "pgpe"]
+        assert table["rows"][1][2] == {"value": summary_pgpe.iqm, "low": summary_pgpe.iqm_low,
+                                       "high": summary_pgpe.iqm_high, "digits": 1}
+        assert table["rows"][0][5] == "—"
+        assert table["rows"][1][5]["value"] == pgpe_over_openai.probability
+        assert table["rows"][1][6] == ", ".join(f"{value:.1f}" for value in scores["pgpe"])
+    assert [row[0] for row in record["notes"]["kinds"]["rows"]] == ["openai", "pgpe"]
+
+    trained = run_files(runs)
+    again = run("strategies.py", *args, "--results", str(tmp_path / "again"), cwd=tmp_path)
+    assert again.returncode == 0, again.stderr
+    assert run_files(runs) == trained  # nothing trained again
+    repeated = record_of(tmp_path / "again")
+    assert {key: repeated["notes"][key] for key in ("static", "hebbian", "kinds")} == {
+        key: record["notes"][key] for key in ("static", "hebbian", "kinds")}
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--strategies", "openai,nope"], "--strategies openai,nope: give distinct names"),
+    (["--kinds", "static,static"], "--kinds static,static: give distinct names"),
+    (["--seeds", "0"], "--seeds 0: must be from 1 to 1000"),
+])
+def test_strategies_refuses_bad_input_in_one_line(tmp_path, argv, message):
+    result = run("strategies.py", *argv, "--results", str(tmp_path / "records"), cwd=tmp_path)
+    assert result.returncode == 2 and message in result.stderr.splitlines()[-1]
+    assert not (tmp_path / "records").exists() and not (tmp_path / "runs").exists()
+
+
+def test_modern_es_record_is_the_evaluations_of_the_two_runs(tmp_path):
+    args = ["--environment", "Ant-v5,AntAsymRight-v5", "--popsize", "2", "--generations", "5", "--episodes", "2"]
+    first = run("modern_es.py", *args, "--results", str(tmp_path / "first"), cwd=tmp_path)
+    assert first.returncode == 0, first.stderr
+    record = record_of(tmp_path / "first")
+    table = record["notes"]["results"]
+    assert table["columns"][:5] == ["settings", "Ant-v5: return", "Ant-v5: forward x", "AntAsymRight-v5: return",
+                                    "AntAsymRight-v5: forward x"]
+    folder = tmp_path / "runs" / "modern_es" / "Ant-v5+AntAsymRight-v5"
+    for row, setting in zip(table["rows"], ("faithful", "modern"), strict=True):
+        [run_dir] = [path.parent for path in (folder / setting).glob("*/metrics.csv")]
+        config = json.loads((run_dir / "config.json").read_text())
+        assert config["es"]["optimizer"] == ("adam" if setting == "modern" else "sgd")
+        evaluation = json.loads((folder / setting / f"evaluation-{run_dir.name}.json").read_text())
+        assert evaluation["seed"] == 2**31 and evaluation["weights"]["generation"] == 5
+        ant, right = evaluation["environments"]
+        assert row[0] == setting and row[1] == f"{ant['mean']:,.1f} ± {ant['std']:,.1f}"
+        assert row[4] == f"{right['forward_mean']:,.1f} ± {right['forward_std']:,.1f} m"
+        assert record["measures"][f"{setting}_Ant-v5_return"]["values"] == ant["returns"]
+        last = (run_dir / "metrics.csv").read_text().splitlines()[-1].split(",")
+        assert row[5].endswith("(generation 5)") and last[0] == "5"
+    trained = run_files(folder)
+    again = run("modern_es.py", *args, "--results", str(tmp_path / "again"), cwd=tmp_path)
+    assert again.returncode == 0, again.stderr
+    assert {path: stamp for path, stamp in run_files(folder).items() if "evaluation" not in path.name} == {
+        path: stamp for path, stamp in trained.items() if "evaluation" not in path.name}
+    assert record_of(tmp_path / "again")["notes"]["results"] == table
+
+
+def test_reservoir_front_record_is_compares_table(tmp_path):
+    need("reservoirs")
+    sys.path.insert(0, str(ROOT))
+    from experiments.reservoir_front import compare
+
+    args = ["--seeds", "1", "2", "--generations", "1", "--popsize", "2", "--episodes", "2", "--threads", "1",
+            "--arms", "static", "static+reservoir", "--folder", str(tmp_path / "runs")]
+    done = run("reservoir_front.py", *args, "--results", str(tmp_path / "records"), cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    record = record_of(tmp_path / "records")
+    results = {arm: {int(seed): value for seed, value in runs.items()}
+               for arm, runs in json.loads((tmp_path / "runs" / "results.json").read_text()).items()}
+    table = record["notes"]["results"]
+    assert table["columns"] == ["arm", "seed 1", "seed 2", "mean"]
+    expected = [[arm, *(round(value, 1) for value in (*per_seed, mean))]
+                for arm, per_seed, mean, _ in compare.means(results, [1, 2])]
+    assert table["rows"] == expected
+    shown = (tmp_path / "runs" / "results.md").read_text().splitlines()[2:]
+    assert [line.split(" | ")[0].strip("| ") for line in shown] == ["static", "static+reservoir"]
+    for line, row in zip(shown, expected, strict=True):
+        assert f"**{row[3]:.1f}**" in line
+    for arm, per_seed, _, _ in compare.means(results, [1, 2]):
+        assert record["measures"][arm]["values"] == per_seed
+
+
+def test_reservoir_front_refuses_bad_input_in_one_line(tmp_path):
+    result = run("reservoir_front.py", "--arms", "nope", "--results", str(tmp_path / "records"), cwd=tmp_path)
+    assert result.returncode == 2 and "--arms" in result.stderr.splitlines()[-1]
+    assert not (tmp_path / "records").exists()
