@@ -51,7 +51,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for arm, per_seed, mean, per_env in compare.means(results, settings.seeds):
         record.add(arm, f"{arm}: each seed's mean evaluation return", "", per_seed)
-        rows.append([arm, *(round(value, 1) for value in (*per_seed, mean, *per_env))])
+        rows.append([arm, *(f"{value:.1f}" for value in (*per_seed, mean, *per_env))])  # as compare.py's table
     record.table("results", ["arm", *(f"seed {seed}" for seed in settings.seeds), "mean", *names], rows)
     record.note("protocol", {"command": ["compare.py", *passed], "folder": str(settings.folder),
                              "environment": settings.environment, "seeds": settings.seeds,

@@ -25,6 +25,7 @@ from pathlib import Path
 from record import ROOT, Record, add_results_flag
 
 from es.strategies import STRATEGIES
+from es.strategies.cma import library_class
 from report import stats
 
 KINDS = {"static": "train_static.py", "hebbian": "train_hebb.py"}
@@ -96,6 +97,13 @@ def main(argv: list[str] | None = None) -> int:
     if not stats.available():
         print(f"strategies.py: error: needs rliable, which is not installed; {stats.INSTALL_HINT}", file=sys.stderr)
         return 2
+    for name in args.strategies:
+        if name in ("cma_es", "sep_cma_es"):
+            try:
+                library_class(name, separable=True)
+            except ValueError as error:
+                print(f"strategies.py: error: {error}", file=sys.stderr)
+                return 2
     record = Record(f"strategies-{args.environment}", ("rliable",), timed=False)
     scores: dict[str, dict[str, list[float]]] = {}
     for kind in args.kinds:
