@@ -14,7 +14,6 @@ mean evaluation return per seed and over the seeds (``compare.means``), one meas
 
 from __future__ import annotations
 
-import argparse
 import json
 import subprocess
 import sys
@@ -28,16 +27,14 @@ SCRIPT = ROOT / "experiments" / "reservoir_front" / "compare.py"
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    cut = argv.index("--") if "--" in argv else len(argv)
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser = compare.build_parser(prog="reservoir_front.py", doc=__doc__)
     add_results_flag(parser)
-    mine, passed = parser.parse_known_args(argv[:cut])
-    if "--dry-run" in passed:
+    settings, _ = compare.parse(argv, parser)  # compare.py's refusals, in one line, before any run
+    if settings.dry_run:
         parser.error("--dry-run: a dry run measures nothing; give it to experiments/reservoir_front/compare.py")
-    passed += argv[cut:]
-    settings, _ = compare.parse(passed)  # its refusals, in one line, before any run
+    cut = argv.index("--") if "--" in argv else len(argv)
+    at = next((i for i, word in enumerate(argv[:cut]) if word == "--results" or word.startswith("--results=")), None)
+    passed = argv if at is None else [*argv[:at], *argv[at + (1 if "=" in argv[at] else 2):]]
     code = subprocess.run([sys.executable, str(SCRIPT), *passed]).returncode
     if code != 0:
         print(f"reservoir_front.py: error: compare.py stopped (exit code {code}); the same command resumes it",
@@ -56,7 +53,7 @@ def main(argv: list[str] | None = None) -> int:
     record.note("protocol", {"command": ["compare.py", *passed], "folder": str(settings.folder),
                              "environment": settings.environment, "seeds": settings.seeds,
                              "episodes": settings.episodes})
-    record.write(mine.results)
+    record.write(settings.results)
     return 0
 
 

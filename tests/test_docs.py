@@ -219,7 +219,7 @@ def check_parses(script: str, args: list[str]) -> None:
     if script.startswith("scripts/"):
         skip_without_extra(script, args)  # their parsers import the extra
     checks = [(script, args)]
-    if "--" in args and script.endswith("compare.py"):
+    if "--" in args and script.endswith(("compare.py", "reservoir_front.py")):
         checks = [(script, args[:args.index("--")]), *((train, args[args.index("--") + 1:]) for train in TRAIN_SCRIPTS)]
     if "--" in args and script.endswith("seeds.py"):  # its own flags, then a training command
         after = args[args.index("--") + 1:]
@@ -425,9 +425,10 @@ def shrink(script: str, args: list[str], folder: PageFolder) -> list[str]:
     if script in TRAIN_SCRIPTS and "--resume" not in args:  # their defaults are the paper's: 200 x 300
         shrunk += [word for flag in ("--generations", "--popsize") if flag not in args for word in (flag, SHRINK[flag])]
         shrunk += [] if "--max_episode_steps" in args else ["--max_episode_steps", "50"]
-    if script in EXPERIMENT_SCRIPTS and "--folder" not in args:  # their default folder is in the checkout
+    runs_compare = script.endswith(("compare.py", "benchmarks/reservoir_front.py"))
+    if (script in EXPERIMENT_SCRIPTS or runs_compare) and "--folder" not in args:  # a default folder in the checkout
         shrunk += ["--folder", str(folder.path / "runs" / Path(script).stem)]
-    if script.endswith("compare.py") and "--arms" not in args:
+    if runs_compare and "--arms" not in args:
         shrunk += ["--arms", "static"]  # each arm is two processes
     if script.startswith("benchmarks/") and "--results" not in args:  # a shrunk run's record is no record
         shrunk += ["--results", str(folder.path / "records")]

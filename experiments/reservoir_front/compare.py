@@ -61,11 +61,10 @@ ARMS = {
 }
 
 
-def parse(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
-    extra = argv[argv.index("--") + 1:] if "--" in argv else []
-    argv = argv[:argv.index("--")] if "--" in argv else argv
-    parser = Parser(prog="compare.py", description=__doc__.splitlines()[0],
-                    formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:]))
+def build_parser(prog: str = "compare.py", doc: str = __doc__) -> Parser:
+    """compare.py's flags (a script that runs it adds its own: benchmarks/reservoir_front.py)."""
+    parser = Parser(prog=prog, description=doc.splitlines()[0], formatter_class=argparse.RawDescriptionHelpFormatter,
+                    epilog="\n".join(doc.splitlines()[2:]))
     parser.add_argument("--environment", default=DEFAULT_ENV, help="training environment(s), as the scripts take them")
     parser.add_argument("--evaluate_on", default=None, help="evaluation environment(s); default: --environment")
     parser.add_argument("--arms", nargs="+", choices=list(ARMS), default=list(ARMS), metavar="ARM",
@@ -78,6 +77,15 @@ def parse(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
     parser.add_argument("--threads", type=threads_value, default=-1)
     parser.add_argument("--folder", type=Path, default=ROOT / "runs" / "reservoir_front")
     parser.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
+    return parser
+
+
+def parse(argv: list[str], parser: Parser | None = None) -> tuple[argparse.Namespace, list[str]]:
+    """compare.py's settings and the training flags after ``--``, checked (``parser``: ``build_parser``'s, or one
+    with more flags)."""
+    extra = argv[argv.index("--") + 1:] if "--" in argv else []
+    argv = argv[:argv.index("--")] if "--" in argv else argv
+    parser = parser or build_parser()
     args = parser.parse_args(argv)
     args.folder = args.folder.resolve()  # the scripts run in the repository root
     resolved = []
