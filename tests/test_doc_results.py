@@ -1,6 +1,7 @@
-"""The scripts behind the training results of docs/strategies.md and docs/modern-es.md (benchmarks/strategies.py,
-benchmarks/modern_es.py), with tiny budgets on real environments: their records hold what the runs' own files
-and the project's statistics give, and the same command again trains nothing and writes the same tables."""
+"""The scripts behind the training results of docs/strategies.md, docs/modern-es.md and docs/reservoirs.md
+(benchmarks/strategies.py, benchmarks/modern_es.py, experiments/reservoir_front/compare.py --record), with tiny
+budgets on real environments: their records hold what the runs' own files and the project's statistics give, and
+the same command again trains nothing and writes the same tables."""
 
 from __future__ import annotations
 
@@ -110,16 +111,20 @@ def test_modern_es_record_is_the_evaluations_of_the_two_runs(tmp_path):
     assert record_of(tmp_path / "again")["notes"]["results"] == table
 
 
-def test_reservoir_front_record_is_compares_table(tmp_path):
+def test_compare_records_its_table(tmp_path):
+    """experiments/reservoir_front/compare.py --record: its printed table, as a record."""
     need("reservoirs")
     sys.path.insert(0, str(ROOT))
     from experiments.reservoir_front import compare
 
     args = ["--seeds", "1", "2", "--generations", "1", "--popsize", "2", "--episodes", "2", "--threads", "1",
-            "--arms", "static", "static+reservoir", "--folder", str(tmp_path / "runs")]
-    done = run("reservoir_front.py", *args, "--results", str(tmp_path / "records"), cwd=tmp_path)
+            "--arms", "static", "static+reservoir", "--folder", str(tmp_path / "runs"), "--record",
+            str(tmp_path / "records")]
+    done = subprocess.run([sys.executable, str(ROOT / "experiments" / "reservoir_front" / "compare.py"), *args],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
     record = record_of(tmp_path / "records")
+    assert record["timed"] is False and "compare.py" in record["command"]
     results = {arm: {int(seed): value for seed, value in runs.items()}
                for arm, runs in json.loads((tmp_path / "runs" / "results.json").read_text()).items()}
     table = record["notes"]["results"]
@@ -133,9 +138,3 @@ def test_reservoir_front_record_is_compares_table(tmp_path):
         assert f"**{row[3]}**" in line
     for arm, per_seed, _, _ in compare.means(results, [1, 2]):
         assert record["measures"][arm]["values"] == per_seed
-
-
-def test_reservoir_front_refuses_bad_input_in_one_line(tmp_path):
-    result = run("reservoir_front.py", "--arms", "nope", "--results", str(tmp_path / "records"), cwd=tmp_path)
-    assert result.returncode == 2 and "--arms" in result.stderr.splitlines()[-1]
-    assert not (tmp_path / "records").exists()

@@ -58,8 +58,7 @@ number = generate.records_files.number
 # extra -> (modules it installs, how to tell a command needs it)
 EXTRAS = {
     "reservoirs": (("reservoirpy", "stable_baselines3", "optuna", "cmaes"),
-                   lambda script, args: script.startswith("scripts/") or "--reservoir" in args
-                   or script.endswith("benchmarks/reservoir_front.py")),
+                   lambda script, args: script.startswith("scripts/") or "--reservoir" in args),
     "ray": (("ray",), lambda script, args: "ray" in args or "--ray" in args or "ray_vs_process" in script),
     "atari": (("ale_py",), lambda script, args: any(re.search(r"ALE/|NoFrameskip|Deterministic-v|pong", word)
                                                      for word in args)),
@@ -219,7 +218,7 @@ def check_parses(script: str, args: list[str]) -> None:
     if script.startswith("scripts/"):
         skip_without_extra(script, args)  # their parsers import the extra
     checks = [(script, args)]
-    if "--" in args and script.endswith(("compare.py", "reservoir_front.py")):
+    if "--" in args and script.endswith("compare.py"):
         checks = [(script, args[:args.index("--")]), *((train, args[args.index("--") + 1:]) for train in TRAIN_SCRIPTS)]
     if "--" in args and script.endswith("seeds.py"):  # its own flags, then a training command
         after = args[args.index("--") + 1:]
@@ -425,10 +424,11 @@ def shrink(script: str, args: list[str], folder: PageFolder) -> list[str]:
     if script in TRAIN_SCRIPTS and "--resume" not in args:  # their defaults are the paper's: 200 x 300
         shrunk += [word for flag in ("--generations", "--popsize") if flag not in args for word in (flag, SHRINK[flag])]
         shrunk += [] if "--max_episode_steps" in args else ["--max_episode_steps", "50"]
-    runs_compare = script.endswith(("compare.py", "benchmarks/reservoir_front.py"))
-    if (script in EXPERIMENT_SCRIPTS or runs_compare) and "--folder" not in args:  # a default folder in the checkout
+    if script in EXPERIMENT_SCRIPTS and "--folder" not in args:  # their default folder is in the checkout
         shrunk += ["--folder", str(folder.path / "runs" / Path(script).stem)]
-    if runs_compare and "--arms" not in args:
+    if script.endswith("compare.py") and "--record" in args:  # a shrunk run's record is no record
+        shrunk = set_flag(shrunk, "--record", str(folder.path / "records"))
+    if script.endswith("compare.py") and "--arms" not in args:
         shrunk += ["--arms", "static"]  # each arm is two processes
     if script.startswith("benchmarks/") and "--results" not in args:  # a shrunk run's record is no record
         shrunk += ["--results", str(folder.path / "records")]
@@ -472,13 +472,14 @@ def run(command: Command, folder: PageFolder, launch) -> None:
     args = expand(shrink(script_word, args, folder), folder.path)
     bring_files(command, args, folder)
     before = folder.run_folders()
-    records = Path(args[args.index("--results") + 1]) if "--results" in args else folder.path / "records"
+    flag = "--record" if script_word.endswith("compare.py") else "--results"
+    records = Path(args[args.index(flag) + 1]) if flag in args else folder.path / "records"
     recorded = len(list(records.glob("*.json")))
     log = folder.path / f"line{command.line}.log"
     code = launch([str(folder.path / script_word), *args], folder.path, log)
     folder.runs += sorted(folder.run_folders() - before, key=lambda path: path.stat().st_mtime)
     assert code == 0, f"{command.name}: {shlex.join([script_word, *args])} exited {code}:\n{log.read_text()[-3000:]}"
-    if script_word.startswith("benchmarks/"):
+    if script_word.startswith("benchmarks/") or (script_word.endswith("compare.py") and "--record" in args):
         assert len(list(records.glob("*.json"))) > recorded, f"{command.name}: wrote no record in {records}"
 
 

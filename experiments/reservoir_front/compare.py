@@ -20,7 +20,8 @@ environment), from the run's last*.dat files. The arms (ARMS) differ only in wha
 Runs go to <folder>/<arm>_seed<seed>/ (default folder: runs/reservoir_front); running the same command
 again resumes unfinished runs and re-evaluates nothing already evaluated. The table (mean return over the
 evaluation episodes, per seed, and the mean over seeds) is printed and written to <folder>/results.md, with
-the numbers in <folder>/results.json. --dry-run prints the commands.
+the numbers in <folder>/results.json, and with --record as a record that docs/reservoirs.md renders.
+--dry-run prints the commands.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ ROOT = Path(__file__).resolve().parent.parent.parent
 sys.path.insert(0, str(ROOT))  # the project's modules, when run as a script
 
 import envs  # noqa: E402
+from benchmarks import record as records  # noqa: E402
 from cli.errors import USER_ERRORS, Parser, explained, say  # noqa: E402
 from cli.flags import positive_int, seed_value, threads_value  # noqa: E402
 from cli.hints import EVALUATE_FLAGS, EVALUATE_SCRIPTS, TRAIN_SCRIPTS  # noqa: E402
@@ -61,10 +63,11 @@ ARMS = {
 }
 
 
-def build_parser(prog: str = "compare.py", doc: str = __doc__) -> Parser:
-    """compare.py's flags (a script that runs it adds its own: benchmarks/reservoir_front.py)."""
-    parser = Parser(prog=prog, description=doc.splitlines()[0], formatter_class=argparse.RawDescriptionHelpFormatter,
-                    epilog="\n".join(doc.splitlines()[2:]))
+def parse(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
+    extra = argv[argv.index("--") + 1:] if "--" in argv else []
+    argv = argv[:argv.index("--")] if "--" in argv else argv
+    parser = Parser(prog="compare.py", description=__doc__.splitlines()[0],
+                    formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:]))
     parser.add_argument("--environment", default=DEFAULT_ENV, help="training environment(s), as the scripts take them")
     parser.add_argument("--evaluate_on", default=None, help="evaluation environment(s); default: --environment")
     parser.add_argument("--arms", nargs="+", choices=list(ARMS), default=list(ARMS), metavar="ARM",
@@ -77,15 +80,9 @@ def build_parser(prog: str = "compare.py", doc: str = __doc__) -> Parser:
     parser.add_argument("--threads", type=threads_value, default=-1)
     parser.add_argument("--folder", type=Path, default=ROOT / "runs" / "reservoir_front")
     parser.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
-    return parser
-
-
-def parse(argv: list[str], parser: Parser | None = None) -> tuple[argparse.Namespace, list[str]]:
-    """compare.py's settings and the training flags after ``--``, checked (``parser``: ``build_parser``'s, or one
-    with more flags)."""
-    extra = argv[argv.index("--") + 1:] if "--" in argv else []
-    argv = argv[:argv.index("--")] if "--" in argv else argv
-    parser = parser or build_parser()
+    parser.add_argument("--record", type=Path, default=None, metavar="FOLDER",
+                        help="also write the table as a record (benchmarks/record.py, not timed: a seeded run's "
+                        "returns are the same at any load) into FOLDER: benchmarks/results for the docs' table")
     args = parser.parse_args(argv)
     args.folder = args.folder.resolve()  # the scripts run in the repository root
     resolved = []
@@ -208,6 +205,23 @@ def table(results: dict[str, dict[int, dict]], seeds: list[int]) -> str:
     return "\n".join(lines)
 
 
+def write_record(results: dict[str, dict[int, dict]], args: argparse.Namespace, extra: list[str]) -> None:
+    """The table as a record, ``reservoir_front-<environment>`` (docs/reservoirs.md renders it): each arm's mean
+    return per seed and over the seeds (``means``), one measure per arm."""
+    environment = args.environment.split(":")[-1].replace(",", "+")
+    record = records.Record(f"reservoir_front-{environment}", timed=False)
+    rows = []
+    for arm, per_seed, mean, per_env in means(results, args.seeds):
+        record.add(arm, f"{arm}: each seed's mean evaluation return", "", per_seed)
+        rows.append([arm, *(f"{value:.1f}" for value in (*per_seed, mean, *per_env))])  # as the printed table
+    record.table("results", ["arm", *(f"seed {seed}" for seed in args.seeds), "mean", *environment_names(results)],
+                 rows)
+    record.note("protocol", {"environment": args.environment, "evaluate_on": args.evaluate_on, "seeds": args.seeds,
+                             "episodes": args.episodes, "popsize": args.popsize, "generations": args.generations,
+                             "training_flags": extra, "folder": str(args.folder)})
+    record.write(args.record)
+
+
 def main(argv: list[str] | None = None) -> int:
     args, extra = parse(sys.argv[1:] if argv is None else argv)
     results: dict[str, dict[int, dict]] = {}
@@ -234,6 +248,8 @@ def main(argv: list[str] | None = None) -> int:
     args.folder.mkdir(parents=True, exist_ok=True)
     atomic_write_text(args.folder / "results.md", text + "\n")
     atomic_write_text(args.folder / "results.json", json.dumps(results, indent=1))
+    if args.record is not None:
+        write_record(results, args, extra)
     return 0
 
 
