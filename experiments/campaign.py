@@ -29,6 +29,7 @@ import csv
 import os
 import shlex
 import signal
+import statistics
 import subprocess
 import time
 from pathlib import Path
@@ -41,7 +42,8 @@ PROGRESS = "progress.md"  # beside them too: how far each run of the campaign go
 MIN_BUDGET = 1  # minutes: the least a chunk is given (the training starts, runs a generation, saves)
 GRACE = 30.0  # seconds a generation may take to finish after the first SIGINT, before a stop at once
 POLL = 0.5  # seconds between looks at the child and at metrics.csv
-SAFETY = 1.15  # a generation may take this much longer than the last one did
+SAFETY = 1.15  # a generation may take this much longer than the last ones did
+PACE_ROWS = 5  # the generations whose median duration is a generation's expected one
 EVALUATION = EVALUATIONS["evaluation"]  # the final centre's evaluation: the run's result
 BEST_EVALUATION = EVALUATIONS["evaluation_best"]  # the best centre's (the checkpoint keeps it), beside it
 MADE_WITH = "made_with.json"  # a run made by older code: the commit and the CPUs whose generations it reproduces
@@ -145,17 +147,16 @@ def command_line(pid: int) -> list[str] | None:
     return [word.decode(errors="replace") for word in words if word]
 
 
-def _last_row(metrics: Path) -> dict | None:
-    """The last complete row of a metrics.csv, or None (no file, no row yet, a row being written)."""
+def _last_rows(metrics: Path, count: int = 1) -> list[dict]:
+    """The last ``count`` complete rows of a metrics.csv, oldest first; none where there is no file or no row yet
+    (a row being written is not complete)."""
     try:
         with open(metrics, newline="") as handle:
             rows = list(csv.DictReader(handle))
     except OSError:
-        return None
-    for row in reversed(rows):
-        if row.get("seconds") not in (None, "") and row.get("generation") not in (None, ""):
-            return row
-    return None
+        return []
+    complete = [row for row in rows if row.get("seconds") not in (None, "") and row.get("generation") not in (None, "")]
+    return complete[-count:]
 
 
 def share_niceness(pid: int) -> None:
@@ -185,10 +186,13 @@ class Chunk:
         self.pending = False  # a second SIGINT to send at the next poll
 
     def last_generation(self) -> tuple[str | None, float | None]:
-        """The last generation metrics.csv records, and its duration in seconds."""
+        """The last generation metrics.csv records, and how long a generation takes: the median duration, in
+        seconds, of the last ``PACE_ROWS`` (one generation slowed by a loaded machine does not set the pace)."""
         metrics = self.find_metrics()
-        row = _last_row(metrics) if metrics is not None else None
-        return (row["generation"], float(row["seconds"])) if row is not None else (None, None)
+        rows = _last_rows(metrics, PACE_ROWS) if metrics is not None else []
+        if not rows:
+            return None, None
+        return rows[-1]["generation"], statistics.median(float(row["seconds"]) for row in rows)
 
     def run(self) -> int:
         """The child's exit code: 0, complete; 130 (or -2: SIGINT reached it while it was closing), stopped with
@@ -196,11 +200,15 @@ class Chunk:
         previous = {signum: signal.signal(signum, self._signal) for signum in (signal.SIGINT, signal.SIGTERM)}
         try:
             seen, duration = self.last_generation()  # a resumed run's: its next generation starts with the child
+            saved = seen  # the last generation saved before this chunk
             began = time.monotonic()
             self.child = subprocess.Popen(self.command, cwd=self.cwd, start_new_session=True)  # only we signal it
             share_niceness(self.child.pid)
             while self.child.poll() is None:
-                if not self.asked and duration is not None and began + 2 * SAFETY * duration > self.deadline:
+                # asked only once the child is training (a generation of this chunk saved): a signal while it
+                # starts would stop it before its first generation, and no chunk would ever make progress
+                if (not self.asked and duration is not None and seen != saved
+                        and began + 2 * SAFETY * duration > self.deadline):
                     self._ask("the budget leaves no room for another generation after this one")
                 time.sleep(POLL)
                 generation, seconds = self.last_generation()

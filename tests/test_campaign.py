@@ -583,3 +583,49 @@ def test_the_status_and_a_chunks_pages_name_a_config_json_of_the_wrong_types(tmp
     assert capsys.readouterr().out.strip() == (f"campaign: the progress page or the curves in {tmp_path / 'results'} "
                                                f"could not be written: ValueError: {broken}/{problem}")
     assert sorted(path.name for path in (tmp_path / "results").iterdir()) == ["carracing_static_seed1"]
+
+
+# a training child as the chunk sees it: it appends a metrics row per generation; its SIGINT handler is installed
+# only after STARTUP seconds (a real one imports for seconds first: a signal before then stops it at once)
+FAKE_TRAINING = """
+import signal, sys, time
+start = time.monotonic()
+asked = []
+def handler(signum, frame):
+    asked.append(signum)
+time.sleep({startup})
+signal.signal(signal.SIGINT, handler)
+for generation in range({first}, {first} + 3):
+    time.sleep(0.8)
+    with open(sys.argv[1], "a") as handle:
+        handle.write(f"{{generation}},0.8\\n")
+    if asked:
+        sys.exit(130)
+"""
+
+
+def fake_chunk(tmp_path: Path, seconds: list[float], budget: float, startup: float = 1.0):
+    from experiments import campaign
+
+    metrics = tmp_path / "metrics.csv"
+    metrics.write_text("generation,seconds\n" + "".join(f"{g},{s}\n" for g, s in enumerate(seconds, 1)))
+    said = []
+    code = campaign.Chunk([sys.executable, "-c", FAKE_TRAINING.format(startup=startup, first=len(seconds) + 1),
+                           str(metrics)], time.monotonic() + budget, lambda: metrics, tmp_path, said.append).run()
+    generations = [int(line.split(",")[0]) for line in metrics.read_text().splitlines()[1:]]
+    return code, generations[len(seconds):], said
+
+
+def test_one_slow_generation_does_not_set_the_pace(tmp_path):
+    """A generation's expected time is the median of the last five: one generation slowed by a loaded machine
+    (4000 s among 10 s ones) does not make a 60 s chunk stop early."""
+    code, trained, said = fake_chunk(tmp_path, [10, 10, 10, 10, 4000], budget=60)
+    assert code == 0 and trained == [6, 7, 8] and not any("no room" in line for line in said)
+
+
+def test_a_chunk_with_room_for_one_generation_trains_it_before_it_asks(tmp_path):
+    """Where the budget holds one generation but not two, the chunk asks the child to stop only once a generation
+    of its own is saved: asked while the child was still starting, it would stop before training anything."""
+    code, trained, said = fake_chunk(tmp_path, [20, 20, 20], budget=30, startup=1.5)
+    assert code == 130 and trained[:1] == [4] and len(trained) <= 2
+    assert any("no room for another generation" in line for line in said)
