@@ -29,36 +29,29 @@ import subprocess
 import sys
 from pathlib import Path
 
-from record import ROOT, Record, add_results_flag
+from record import ROOT, Record, add_results_flag, documented_parser
 
+from cli.flags import positive_int, seed_value
 from es import files
+from es.loop import EVAL_SEEDS
+from es.runfolder import RunFolderError, generations_done, latest_run
 
 CENTRE_EVALUATION = ["--eval_every", "5", "--eval_episodes", "10"]
 MODERN = ["--optimizer", "adam", "--lr", "0.01", "--sigma", "0.02", "--obs_norm", "--l2coeff", "0.005"]
 SETTINGS = {"faithful": [], "modern": MODERN}
-HELD_OUT = 2**31  # the first evaluation seed: seeds from here on are the centre evaluation's, never a training's
+HELD_OUT = EVAL_SEEDS[0]  # 2**31: seeds from here on are the centre evaluation's, never a training's
 
 
 def run_folder(args: argparse.Namespace, setting: str) -> Path:
     return args.folder / args.environment.replace(",", "+") / setting
 
 
-def newest_run(folder: Path) -> Path | None:
-    runs = sorted(path.parent for path in folder.glob("*/metrics.csv"))
-    return runs[-1] if runs else None
-
-
-def generations_done(run: Path | None) -> int:
-    """The generations a run has saved: its metrics.csv's rows."""
-    return 0 if run is None else max(len((run / "metrics.csv").read_text().splitlines()) - 1, 0)
-
-
 def train(args: argparse.Namespace, setting: str) -> Path:
     """The setting's run, trained (or resumed) to ``--generations``; SystemExit with the script's code if it
     fails."""
     folder = run_folder(args, setting)
-    run = newest_run(folder)
-    if run is not None and generations_done(run) >= args.generations:
+    run = latest_run(folder)
+    if generations_done(run) >= args.generations:
         print(f"{setting}: {run} is complete", flush=True)
         return run
     start = ["--resume", str(run)] if run is not None else [
@@ -68,7 +61,7 @@ def train(args: argparse.Namespace, setting: str) -> Path:
                "--threads", "1", "--print_every", "10"]
     print(f"$ python train_static.py {' '.join(command[2:])}", flush=True)
     code = subprocess.run(command).returncode
-    run = newest_run(folder)
+    run = latest_run(folder)
     if code != 0 or run is None or generations_done(run) < args.generations:
         print(f"modern_es.py: error: the {setting} run stopped (exit code {code}); the same command resumes it",
               file=sys.stderr)
@@ -94,13 +87,10 @@ def plus_minus(mean: float, std: float, unit: str = "") -> str:
 
 def centre_log(run: Path) -> str:
     """The run's last centre evaluation (metrics.csv's last row with one), mean ± std over its episodes."""
-    lines = (run / "metrics.csv").read_text().splitlines()
-    header = lines[0].split(",")
-    for line in reversed(lines[1:]):
-        values = dict(zip(header, line.split(","), strict=True))
-        mean, std = float(values["center_eval_mean"]), float(values["center_eval_std"])
+    for row in reversed(files.read_metrics(run / "metrics.csv")):
+        mean, std = float(row["center_eval_mean"]), float(row["center_eval_std"])
         if not math.isnan(mean):
-            return f"{plus_minus(mean, std)} (generation {values['generation']})"
+            return f"{plus_minus(mean, std)} (generation {row['generation']})"
     return "–"
 
 
@@ -109,7 +99,11 @@ def main(argv: list[str] | None = None) -> int:
     record = Record(f"modern_es-{args.environment.replace(',', '+')}", timed=False)
     rows, columns = [], None
     for setting in SETTINGS:
-        run = train(args, setting)
+        try:
+            run = train(args, setting)
+        except RunFolderError as error:  # a run folder there whose checkpoint cannot be read
+            print(f"modern_es.py: error: {error}", file=sys.stderr)
+            return 2
         evaluation = evaluate(args, run)
         cells, heads = [], []
         for body in evaluation["environments"]:
@@ -135,25 +129,17 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def parse(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser = documented_parser(__doc__)
     parser.add_argument("--environment", default="HalfCheetah-v5",
                         help="a Gymnasium id, or several separated by commas, as train_static.py takes them")
-    parser.add_argument("--popsize", type=int, default=48)
-    parser.add_argument("--generations", type=int, default=100)
-    parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--episodes", type=int, default=10, help="evaluation episodes per body")
+    parser.add_argument("--popsize", type=positive_int, default=48)
+    parser.add_argument("--generations", type=positive_int, default=100)
+    parser.add_argument("--seed", type=seed_value, default=1)
+    parser.add_argument("--episodes", type=positive_int, default=10, help="evaluation episodes per body")
     parser.add_argument("--folder", type=Path, default=Path("runs/modern_es"),
                         help="where the runs go: <FOLDER>/<environment>/<setting> (default: runs/modern_es)")
     add_results_flag(parser)
-    args = parser.parse_args(argv)
-    bounds = (("--popsize", args.popsize, 2, 100_000), ("--generations", args.generations, 1, 100_000),
-              ("--seed", args.seed, 0, 2**31 - 2), ("--episodes", args.episodes, 1, 10_000))
-    for flag, value, low, high in bounds:
-        if not low <= value <= high:
-            parser.error(f"{flag} {value}: must be from {low} to {high}")
-    return args
+    return parser.parse_args(argv)
 
 
 if __name__ == "__main__":

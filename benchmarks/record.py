@@ -35,6 +35,8 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:  # the project's modules, for a benchmark run as a script
     sys.path.insert(0, str(ROOT))
 
+from cli.errors import UserError  # noqa: E402
+from cli.train import check_writable  # noqa: E402
 from report.machine import cpu_model  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results"
@@ -64,8 +66,23 @@ class Measure:
         self.rounds = len(self.values)
 
 
+def documented_parser(doc: str) -> argparse.ArgumentParser:
+    """A benchmark's parser, its description and epilog its module's docstring (first line, then the rest)."""
+    return argparse.ArgumentParser(description=doc.splitlines()[0], epilog="\n".join(doc.splitlines()[2:]),
+                                   formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
+def writable_folder(text: str) -> Path:
+    """A folder a record can be written into (made where it is missing), checked before the benchmark runs."""
+    try:
+        check_writable(text)
+    except UserError:
+        raise argparse.ArgumentTypeError(f"{text} is not a writable folder, nor one that can be made there") from None
+    return Path(text)
+
+
 def add_results_flag(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--results", type=Path, default=RESULTS, metavar="FOLDER",
+    parser.add_argument("--results", type=writable_folder, default=RESULTS, metavar="FOLDER",
                         help="where the run's JSON record is written (default: benchmarks/results)")
 
 

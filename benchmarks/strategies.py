@@ -22,8 +22,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-from record import ROOT, Record, add_results_flag
+from record import ROOT, Record, add_results_flag, documented_parser
 
+from cli.flags import positive_int
 from es.strategies import STRATEGIES
 from es.strategies.cma import library_class
 from report import stats
@@ -60,36 +61,51 @@ def estimate(value: float, low: float, high: float, runs: int, digits: int = 1) 
     return {"value": value, "low": low, "high": high, "digits": digits}
 
 
-def kind_table(scores: dict[str, list[float]], reps: int) -> list[list]:
+def kind_table(scores: dict[str, list[float]], summaries: dict[str, stats.Summary], reps: int) -> list[list]:
     """One row per strategy: runs, IQM, mean, median, P(X > openai), each seed's score."""
-    summaries = stats.summarise(scores, reps)
     against = {pair.x: pair for pair in stats.improvements(scores, reps) if pair.y == BASELINE}
     rows = []
-    for summary in summaries:
-        pair = against.get(summary.group)
-        rows.append([summary.group, summary.runs,
-                     estimate(summary.iqm, summary.iqm_low, summary.iqm_high, summary.runs),
+    for name, summary in summaries.items():
+        pair = against.get(name)
+        rows.append([name, summary.runs, estimate(summary.iqm, summary.iqm_low, summary.iqm_high, summary.runs),
                      estimate(summary.mean, summary.mean_low, summary.mean_high, summary.runs),
                      round(summary.median, 1),
                      "—" if pair is None else estimate(pair.probability, pair.low, pair.high, summary.runs, 2),
-                     ", ".join(f"{value:.1f}" for value in scores[summary.group])])
+                     ", ".join(f"{value:.1f}" for value in scores[name])])
     return rows
 
 
-def kinds_table(scores: dict[str, dict[str, list[float]]], reps: int) -> list[list]:
-    """One row per strategy run on both kinds: each kind's IQM and P(static > Hebbian)."""
+def kinds_table(scores: dict[str, dict[str, list[float]]], summaries: dict[str, dict[str, stats.Summary]],
+                reps: int) -> list[list]:
+    """One row per strategy run on both kinds: each kind's IQM (``summaries``, each group's bootstrap seeded on
+    its own) and P(static > Hebbian)."""
     rows = []
-    for strategy in scores["static"]:
-        if strategy not in scores["hebbian"]:
-            continue
-        pair = {"static": scores["static"][strategy], "hebbian": scores["hebbian"][strategy]}
-        summary = {s.group: s for s in stats.summarise(pair, reps)}
+    for strategy in [name for name in scores["static"] if name in scores["hebbian"]]:
+        pair = {kind: scores[kind][strategy] for kind in ("static", "hebbian")}
         [better] = [p for p in stats.improvements(pair, reps) if p.x == "static"]
-        runs = min(s.runs for s in summary.values())
-        rows.append([strategy, *(estimate(summary[kind].iqm, summary[kind].iqm_low, summary[kind].iqm_high,
-                                          summary[kind].runs) for kind in ("static", "hebbian")),
-                     estimate(better.probability, better.low, better.high, runs, 2)])
+        shown = [summaries[kind][strategy] for kind in ("static", "hebbian")]
+        rows.append([strategy, *(estimate(s.iqm, s.iqm_low, s.iqm_high, s.runs) for s in shown),
+                     estimate(better.probability, better.low, better.high, min(s.runs for s in shown), 2)])
     return rows
+
+
+def train_and_score(args: argparse.Namespace, record: Record) -> tuple[dict, dict]:
+    """Each (kind, strategy) launch trained or resumed, and its runs' final scores (seed by seed, measures of
+    ``record``) with each group's summary; SystemExit with the launch's code where one stops."""
+    scores: dict[str, dict[str, list[float]]] = {kind: {} for kind in args.kinds}
+    for kind in args.kinds:
+        for strategy in args.strategies:
+            code = launch(args, kind, strategy)
+            if code != 0:
+                print(f"strategies.py: error: the {kind} {strategy} runs stopped (exit code {code}); the same command "
+                      "resumes them", file=sys.stderr)
+                raise SystemExit(2 if code == 2 else 1)
+            found = stats.collect([f"{strategy}={launch_folder(args, kind, strategy)}"], "final")[strategy]
+            scores[kind][strategy] = [found[run] for run in sorted(found, key=seed_of)]
+            record.add(f"{kind}_{strategy}", f"{kind} network, {strategy}: each seed's final score on "
+                       f"{args.environment}", "", scores[kind][strategy])
+    summaries = {kind: {s.group: s for s in stats.summarise(scores[kind], args.reps)} for kind in scores}
+    return scores, summaries
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -97,33 +113,21 @@ def main(argv: list[str] | None = None) -> int:
     if not stats.available():
         print(f"strategies.py: error: needs rliable, which is not installed; {stats.INSTALL_HINT}", file=sys.stderr)
         return 2
-    for name in args.strategies:
-        if name in ("cma_es", "sep_cma_es"):
-            try:
-                library_class(name, separable=True)
-            except ValueError as error:
-                print(f"strategies.py: error: {error}", file=sys.stderr)
-                return 2
-    record = Record(f"strategies-{args.environment}", ("rliable",), timed=False)
-    scores: dict[str, dict[str, list[float]]] = {}
-    for kind in args.kinds:
-        scores[kind] = {}
-        for strategy in args.strategies:
-            code = launch(args, kind, strategy)
-            if code != 0:
-                print(f"strategies.py: error: the {kind} {strategy} runs stopped (exit code {code}); the same command "
-                      "resumes them", file=sys.stderr)
-                return 2 if code == 2 else 1
-            found = stats.collect([f"{strategy}={launch_folder(args, kind, strategy)}"], "final")[strategy]
-            scores[kind][strategy] = [found[run] for run in sorted(found, key=seed_of)]
-            record.add(f"{kind}_{strategy}", f"{kind} network, {strategy}: each seed's final score on "
-                       f"{args.environment}", "", scores[kind][strategy])
+    try:
+        for name in {"cma_es", "sep_cma_es"} & set(args.strategies):
+            library_class(name, separable=True)  # the cmaes library, before any run
+        record = Record(f"strategies-{args.environment}", ("rliable",), timed=False)
+        scores, summaries = train_and_score(args, record)
+    except ValueError as error:  # the cmaes library missing; a launch folder without its runs (stats.StatsError)
+        print(f"strategies.py: error: {error}", file=sys.stderr)
+        return 2
+    for kind in scores:
         record.table(kind, ["strategy", "runs", "IQM [95 % CI]", "mean [95 % CI]", "median",
                             f"P(X > {BASELINE}) [95 % CI]", "final score, seeds 1 .."],
-                     kind_table(scores[kind], args.reps))
+                     kind_table(scores[kind], summaries[kind], args.reps))
     if set(KINDS) <= set(scores):
         record.table("kinds", ["strategy", "static: IQM [95 % CI]", "Hebbian: IQM [95 % CI]",
-                               "P(static > Hebbian) [95 % CI]"], kinds_table(scores, args.reps))
+                               "P(static > Hebbian) [95 % CI]"], kinds_table(scores, summaries, args.reps))
     record.note("protocol", {"environment": args.environment, "popsize": args.popsize,
                              "generations": args.generations, "seeds": args.seeds, "score": "final",
                              "reps": args.reps, "folder": str(args.folder)})
@@ -140,30 +144,23 @@ def names(text: str, valid, flag: str, parser: argparse.ArgumentParser) -> list[
 
 
 def parse(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser = documented_parser(__doc__)
     parser.add_argument("--environment", default="CartPole-v1", help="a Gymnasium id, as train_static.py takes it")
     parser.add_argument("--kinds", default=",".join(KINDS), help="comma-separated, of " + ", ".join(KINDS))
     parser.add_argument("--strategies", default=",".join(DEFAULT_STRATEGIES),
                         help="comma-separated, of " + ", ".join(list(STRATEGIES)))
-    parser.add_argument("--popsize", type=int, default=16)
-    parser.add_argument("--generations", type=int, default=30)
-    parser.add_argument("--seeds", type=int, default=5, help="runs per strategy and kind: seeds 1 .. N")
-    parser.add_argument("--jobs", type=int, default=None, help="runs at a time (experiments/seeds.py's --jobs)")
+    parser.add_argument("--popsize", type=positive_int, default=16)
+    parser.add_argument("--generations", type=positive_int, default=30)
+    parser.add_argument("--seeds", type=positive_int, default=5, help="runs per strategy and kind: seeds 1 .. N")
+    parser.add_argument("--jobs", type=positive_int, default=None,
+                        help="runs at a time (experiments/seeds.py's --jobs)")
     parser.add_argument("--folder", type=Path, default=Path("runs/strategies"),
                         help="where the runs go: <FOLDER>/<environment>/<kind>_<strategy> (default: runs/strategies)")
-    parser.add_argument("--reps", type=int, default=stats.DEFAULT_REPS, help="bootstrap replications")
+    parser.add_argument("--reps", type=positive_int, default=stats.DEFAULT_REPS, help="bootstrap replications")
     add_results_flag(parser)
     args = parser.parse_args(argv)
     args.kinds = names(args.kinds, KINDS, "--kinds", parser)
     args.strategies = names(args.strategies, list(STRATEGIES), "--strategies", parser)
-    bounds = (("--popsize", args.popsize, 2, 100_000), ("--generations", args.generations, 1, 100_000),
-              ("--seeds", args.seeds, 1, 1000), ("--reps", args.reps, 1, 1_000_000),
-              ("--jobs", args.jobs or 1, 1, 1024))
-    for flag, value, low, high in bounds:
-        if not low <= value <= high:
-            parser.error(f"{flag} {value}: must be from {low} to {high}")
     return args
 
 

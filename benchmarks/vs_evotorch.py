@@ -61,7 +61,7 @@ from pathlib import Path
 import numpy as np
 from peers import evotorch_train
 from peers.evotorch_train import EvoTorchSettings
-from record import Record, add_results_flag
+from record import Record, add_results_flag, documented_parser
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
@@ -334,9 +334,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def parse(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser = documented_parser(__doc__)
     parser.add_argument("--environment", default="CartPole-v1")
     parser.add_argument("--strategies", default="snes,pgpe", help="comma-separated, of " + ", ".join(STRATEGIES))
     parser.add_argument("--settings", default=",".join(SETTINGS), help="comma-separated, of " + ", ".join(SETTINGS))

@@ -40,7 +40,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from record import Record, add_results_flag
+from record import Record, add_results_flag, documented_parser
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
@@ -158,9 +158,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def parse(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser = documented_parser(__doc__)
     parser.add_argument("--environment", default="HalfCheetah-v5")
     parser.add_argument("--workers", type=int, default=1, help="this tool's --threads; EvoTorch's num_actors")
     parser.add_argument("--popsize", type=int, default=32)

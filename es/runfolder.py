@@ -365,6 +365,17 @@ def read_checkpoint(path: Path) -> Checkpoint:
                              f"({type(error).__name__}); its run cannot be continued") from None
 
 
+def latest_run(folder: Path) -> Path | None:
+    """The newest run folder with a checkpoint in ``folder`` (a run folder's name starts with its time)."""
+    runs = sorted(path.parent for path in Path(folder).glob("*/checkpoint.npz"))
+    return runs[-1] if runs else None
+
+
+def generations_done(run_dir: Path | None) -> int:
+    """The generations a run folder's checkpoint holds (0 for no run)."""
+    return 0 if run_dir is None else read_checkpoint(run_dir / "checkpoint.npz").generation
+
+
 _HELD_LOCKS: list[int] = []
 
 

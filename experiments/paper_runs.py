@@ -19,7 +19,7 @@ from pathlib import Path
 
 from cli.errors import USER_ERRORS, say
 from cli.hints import EVALUATE_SCRIPTS, TRAIN_SCRIPTS
-from es.runfolder import named_file
+from es.runfolder import generations_done, latest_run, named_file  # noqa: F401 (theirs too)
 from experiments import campaign
 from policies import KINDS
 
@@ -101,17 +101,6 @@ def run_name(args: argparse.Namespace, experiment: dict) -> str:
     seed = args.seed if args.seed is not None else experiment["run"]["seed"]
     variant = getattr(args, "variant", None)
     return f"{args.experiment}_{args.kind}{'_' + Path(variant).stem if variant else ''}_seed{seed}"
-
-
-def latest_run(folder: Path) -> Path | None:
-    runs = sorted(path.parent for path in folder.glob("*/checkpoint.npz"))  # names start with the time
-    return runs[-1] if runs else None
-
-
-def generations_done(run_dir: Path | None) -> int:
-    from es.runfolder import read_checkpoint
-
-    return 0 if run_dir is None else read_checkpoint(run_dir / "checkpoint.npz").generation
 
 
 def overrides(args: argparse.Namespace, *names: str) -> list[str]:

@@ -74,7 +74,7 @@ def test_strategies_record_is_the_runs_final_scores_and_their_statistics(tmp_pat
 @pytest.mark.parametrize("argv, message", [
     (["--strategies", "openai,nope"], "--strategies openai,nope: give distinct names"),
     (["--kinds", "static,static"], "--kinds static,static: give distinct names"),
-    (["--seeds", "0"], "--seeds 0: must be from 1 to 1000"),
+    (["--seeds", "0"], "argument --seeds: must be a whole number >= 1, got 0"),
 ])
 def test_strategies_refuses_bad_input_in_one_line(tmp_path, argv, message):
     result = run("strategies.py", *argv, "--results", str(tmp_path / "records"), cwd=tmp_path)

@@ -80,7 +80,7 @@ def parse(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
     parser.add_argument("--threads", type=threads_value, default=-1)
     parser.add_argument("--folder", type=Path, default=ROOT / "runs" / "reservoir_front")
     parser.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
-    parser.add_argument("--record", type=Path, default=None, metavar="FOLDER",
+    parser.add_argument("--record", type=records.writable_folder, default=None, metavar="FOLDER",
                         help="also write the table as a record (benchmarks/record.py, not timed: a seeded run's "
                         "returns are the same at any load) into FOLDER: benchmarks/results for the docs' table")
     args = parser.parse_args(argv)
