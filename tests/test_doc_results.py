@@ -138,3 +138,70 @@ def test_compare_records_its_table(tmp_path):
         assert f"**{row[3]}**" in line
     for arm, per_seed, _, _ in compare.means(results, [1, 2]):
         assert record["measures"][arm]["values"] == per_seed
+
+
+def test_ermrl_example_records_the_tests_summaries_and_the_studies_trials(tmp_path):
+    """experiments/ermrl_example.py --record: each row is a model's mean return in test.py's own summary, the
+    published input is tested in its own folder on the same study, the trials are the journals', and the same
+    command again runs no script and writes the same tables."""
+    need("reservoirs")
+    import optuna
+
+    from reservoirs import study
+
+    args = ["--nb_trials", "1", "--HP_training_steps", "64", "--training_steps", "64", "--seeds", "0", "1",
+            "--folder", str(tmp_path / "runs"), "--record", str(tmp_path / "records")]
+
+    def example(*more: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, str(ROOT / "experiments" / "ermrl_example.py"), *args, *more],
+                              cwd=tmp_path, capture_output=True, text=True, timeout=600)
+
+    done = example()
+    assert done.returncode == 0, done.stderr
+    record = record_of(tmp_path / "records")
+    assert record["timed"] is False and "ermrl_example.py" in record["command"]
+    runs = tmp_path / "runs"
+
+    def summary(folder: Path, h_test: str, seed: int) -> dict:
+        return json.loads((folder / "models" / f"CartPole-v1_{h_test}" / f"test_0k_steps_seed_{seed}.json").read_text())
+
+    tests = [summary(runs, "del_obs_demo", seed) for seed in (0, 1)]
+    published = summary(runs / "published_input", "del_obs_demo", 0)
+    zero = summary(runs, "del_obs_zero", 0)
+    assert (published["zero_action"], zero["zero_action"], tests[0]["zero_action"]) == (True, True, False)
+    assert published["trial"] == tests[0]["trial"] and published["params"] == tests[0]["params"]
+    rows = record["notes"]["results"]["rows"]
+    assert [row[0] for row in rows[:4]] == ["`PPO`", "`RES_PPO_0.0003`", "`RES_PPO_0.0001`", "`RES_PPO_0.00005`"]
+
+    def cell(entry: dict) -> str:
+        return f"{entry['mean_return_last_10']:.1f} ({entry['episodes']})"
+
+    for row, model in zip(rows, ("PPO", "RES_PPO_0.0003", "RES_PPO_0.0001", "RES_PPO_0.00005"), strict=False):
+        assert row[1:] == [cell(tests[0]["models"][model]), cell(tests[1]["models"][model])]
+        assert record["measures"][model]["values"] == [test["models"][model]["mean_return_last_10"] for test in tests]
+    assert rows[4][1:] == [cell(published["models"]["RES_PPO_0.0003"]), "–"]
+    assert rows[5][1:] == [cell(zero["models"]["RES_PPO_0.0003"]), "–"]
+    trials = record["notes"]["trials"]
+    for h_test, fitness_column in (("del_obs_demo", 3), ("del_obs_zero", 6)):
+        name = study.study_name("CartPole-v1", h_test, training_steps=64)
+        [trial] = optuna.load_study(study_name=name, storage=study.open_journal(runs / study.journal_path(name))).trials
+        assert trials["rows"][0][fitness_column] == f"{trial.value:.2f}"
+        assert trials["columns"][fitness_column] == f"{h_test}: fitness"
+    assert [row[0] for row in record["notes"]["minutes"]["rows"]] == [
+        "evolve del_obs_demo", "test del_obs_demo seed 0", "test del_obs_demo seed 1", "published input",
+        "evolve del_obs_zero", "test del_obs_zero seed 0"]
+    def outputs() -> dict[Path, int]:  # the scripts' (the table, results.md, is written again)
+        return {path: stamp for path, stamp in run_files(runs).items() if path.name != "results.md"}
+
+    written = outputs()
+    again = example("--record", str(tmp_path / "again"))
+    assert again.returncode == 0, again.stderr
+    assert "$ " not in again.stdout and outputs() == written
+    assert record_of(tmp_path / "again")["notes"] == record["notes"]
+
+
+def test_ermrl_example_refuses_a_seed_twice(tmp_path):
+    done = subprocess.run([sys.executable, str(ROOT / "experiments" / "ermrl_example.py"), "--seeds", "0", "0",
+                           "--folder", str(tmp_path)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and done.stderr.strip().splitlines()[-1].endswith("--seeds 0 0: each seed once")
+    assert not any(tmp_path.iterdir())

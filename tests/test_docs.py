@@ -58,7 +58,8 @@ number = generate.records_files.number
 # extra -> (modules it installs, how to tell a command needs it)
 EXTRAS = {
     "reservoirs": (("reservoirpy", "stable_baselines3", "optuna", "cmaes"),
-                   lambda script, args: script.startswith("scripts/") or "--reservoir" in args),
+                   lambda script, args: script.startswith("scripts/") or "--reservoir" in args
+                   or script.endswith("ermrl_example.py")),
     "ray": (("ray",), lambda script, args: "ray" in args or "--ray" in args or "ray_vs_process" in script),
     "atari": (("ale_py",), lambda script, args: any(re.search(r"ALE/|NoFrameskip|Deterministic-v|pong", word)
                                                      for word in args)),
@@ -90,6 +91,8 @@ SHRINK = {"--generations": "1", "--popsize": "2", "--episodes": "1", "--eval_epi
           "--nb_seeds": "1", "--seeds": "1", "--rounds": "1", "--steps": "20", "--budget": "300"}
 TRAIN_SCRIPTS = ("train_static.py", "train_hebb.py")
 EXPERIMENT_SCRIPTS = ("experiments/paper.py", "experiments/reservoir_front/compare.py")
+ERMRL_EXAMPLE = "experiments/ermrl_example.py"  # its defaults are the docs' measurement: shrunk as a training script
+RECORDING_SCRIPTS = ("experiments/reservoir_front/compare.py", ERMRL_EXAMPLE)  # --record FOLDER
 # documented commands that fail for a known reason being fixed elsewhere
 # what a page's folder must not link to: the outputs commands write
 OUTPUTS = {".git", ".venv", "runs", "weights", "heb_coeffs", "logs", "models", "__pycache__", ".pytest_cache"}
@@ -424,9 +427,12 @@ def shrink(script: str, args: list[str], folder: PageFolder) -> list[str]:
     if script in TRAIN_SCRIPTS and "--resume" not in args:  # their defaults are the paper's: 200 x 300
         shrunk += [word for flag in ("--generations", "--popsize") if flag not in args for word in (flag, SHRINK[flag])]
         shrunk += [] if "--max_episode_steps" in args else ["--max_episode_steps", "50"]
-    if script in EXPERIMENT_SCRIPTS and "--folder" not in args:  # their default folder is in the checkout
-        shrunk += ["--folder", str(folder.path / "runs" / Path(script).stem)]
-    if script.endswith("compare.py") and "--record" in args:  # a shrunk run's record is no record
+    if script == ERMRL_EXAMPLE:
+        shrunk += [word for flag in ("--nb_trials", "--HP_training_steps", "--training_steps", "--seeds")
+                   if flag not in args for word in (flag, SHRINK[flag])]
+    if (script in EXPERIMENT_SCRIPTS or script == ERMRL_EXAMPLE) and "--folder" not in args:  # their default
+        shrunk += ["--folder", str(folder.path / "runs" / Path(script).stem)]  # folder is in the checkout
+    if script in RECORDING_SCRIPTS and "--record" in args:  # a shrunk run's record is no record
         shrunk = set_flag(shrunk, "--record", str(folder.path / "records"))
     if script.endswith("compare.py") and "--arms" not in args:
         shrunk += ["--arms", "static"]  # each arm is two processes
