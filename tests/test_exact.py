@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import decimal
 import hashlib
+import json
 import math
 import os
 import platform
@@ -226,3 +227,25 @@ def test_the_same_bits_on_the_c_librarys_and_numpys_other_paths():
         assert ours == bits_digest(), name
         if "GLIBC_TUNABLES" in env and glibc_with_fma():
             assert c_library != c_library_digest(), name
+
+
+def test_glibc_differences_counts_what_the_two_paths_give(tmp_path):
+    """benchmarks/glibc_differences.py: where glibc takes its FMA code here, the path without it gives other exp
+    bits on some inputs, and none where both paths are the same code; the counts repeat from run to run."""
+    def record() -> dict:
+        folder = tmp_path / str(len(list(tmp_path.iterdir())))
+        done = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "glibc_differences.py"), "--values", "20000",
+                               "--tracks", "3", "--results", str(folder)], cwd=ROOT, capture_output=True, text=True,
+                              timeout=600)
+        assert done.returncode == 0, done.stderr[-3000:]
+        [path] = folder.glob("glibc_differences-*.json")
+        return json.loads(path.read_text())
+
+    first, second = record(), record()
+    counts = {name: measure["values"] for name, measure in first["measures"].items()}
+    assert counts == {name: measure["values"] for name, measure in second["measures"].items()}
+    assert set(counts) == {"exp", "log", "sin", "cos", "atan2", "pow", "tracks"} and first["timed"] is False
+    assert (counts["exp"][0] > 0) == glibc_with_fma()
+    rows = first["notes"]["differences"]["rows"]
+    assert [row[2] for row in rows] == [f"{int(counts[name][0]):,} of {20000 if name != 'tracks' else 3:,}"
+                                        for name in counts]
