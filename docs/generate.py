@@ -93,6 +93,10 @@ MARKERS: dict[str, Marker] = {
     "best": Marker(
         "RUN [ENVIRONMENT]", (1, 2), "the evaluation of a campaign run's best centre, with the generation it scored "
         "in and its training return", one_run(runs_files.best), pending=runs_files.PENDING),
+    "lengths": Marker(
+        "RUN [ENVIRONMENT]", (1, 2), "how long a campaign run's evaluation episodes lasted: all of one length, or "
+        "how many last the longest and what they score, and the others' lengths and median return",
+        one_run(runs_files.lengths), pending=runs_files.PENDING),
     "frames": Marker(
         "RUN", (1,), "a campaign run's frames.png, every 100th frame of its first evaluation episode",
         lambda words, where: runs_files.frames(words[0], where.page, where.runs), pending=runs_files.FRAMES_PENDING),

@@ -37,6 +37,7 @@ import time
 import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
+from unittest import mock
 
 import pytest
 
@@ -741,6 +742,22 @@ def test_a_campaign_result_is_rendered_from_its_evaluation(evaluated_runs):
               f"{below} of 2 episodes below three quarters of the mean ({number(floor)})")
     marker = "<!-- spread:carracing_hebbian_seed1 CarRacing-v3 -->{}<!-- end spread -->"
     assert generate.render(marker.format("old"), page, runs=evaluated_runs) == marker.format(spread)
+    # the lengths, written from the definition for these 2 episodes, and for made-up ones of each form
+    steps = entry["steps"]
+    expected = (f"every one of its 2 episodes ends at step {steps[0]}" if steps[0] == steps[1]
+                else f"its 2 episodes end at steps {min(steps)}–{max(steps)} (median {number(sum(steps) / 2)})")
+    marker = "<!-- lengths:carracing_hebbian_seed1 CarRacing-v3 -->{}<!-- end lengths -->"
+    assert generate.render(marker.format("old"), page, runs=evaluated_runs) == marker.format(expected)
+    made_up = {"steps": [1000, 150, 1000, 997, 400], "returns": [651.0, 79.25, 889.0, 514.0, 200.0]}
+    with mock.patch.object(generate.runs_files, "evaluation_of", return_value=(run, {}, made_up)):
+        assert generate.runs_files.lengths("x", None, page) == (
+            "2 of its 5 episodes last 1000 steps, the longest, and score 651–889; the other 3 end at steps 150–997 "
+            "(median 400), with a median return of 200")
+        made_up["steps"][2] = 999
+        assert generate.runs_files.lengths("x", None, page) == "its 5 episodes end at steps 150–1000 (median 997)"
+        made_up["steps"] = [3]
+        with pytest.raises(generate.FigureError, match="1 episode lengths for 5 returns"):
+            generate.runs_files.lengths("x", None, page)
     # the best centre: the first generation of metrics.csv with the highest centre return, evaluated on the same seeds
     with open(run / "metrics.csv", newline="") as handle:
         top = max(csv.DictReader(handle), key=lambda row: float(row["center_return"]))
