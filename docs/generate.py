@@ -97,6 +97,12 @@ MARKERS: dict[str, Marker] = {
         "RUN [ENVIRONMENT]", (1, 2), "how long a campaign run's evaluation episodes lasted: all of one length, or "
         "how many last the longest and what they score, and the others' lengths and median return",
         one_run(runs_files.lengths), pending=runs_files.PENDING),
+    "curve": Marker(
+        "RUN THRESHOLD [THRESHOLD ...]", tuple(range(2, 10)), "how an evaluated campaign run trained: the first "
+        "generation its population's mean return passed each threshold, and the range of that mean and of the "
+        "centre's training episodes over the last 50 generations",
+        lambda words, where: runs_files.curve(words[0], words[1:], where.page, where.runs),
+        pending=runs_files.PENDING),
     "frames": Marker(
         "RUN", (1,), "a campaign run's frames.png, every 100th frame of its first evaluation episode",
         lambda words, where: runs_files.frames(words[0], where.page, where.runs), pending=runs_files.FRAMES_PENDING),

@@ -171,6 +171,42 @@ def lengths(name: str, environment: str | None, page: Path, runs: Path = RUNS) -
             f"with a median return of {number(float(np.median(returns[short])))}")
 
 
+LAST_GENERATIONS = 50  # the stretch of a run's end a curve marker sums up
+
+
+def curve(name: str, thresholds: list[str], page: Path, runs: Path = RUNS) -> str:
+    """How a completed campaign run's training went, from its ``metrics.csv``: the first generation at which the
+    population's mean return (``return_mean``) passed each threshold, and its range and the centre's training
+    episodes' over the last 50 generations: "the population's mean return passed 100 at generation 96 and 500 at
+    generation 146, and stayed between 528 and 664 over the last 50 generations, while the centre's own training
+    episode scored 137 to 893 in them"."""
+    run = evaluated(name, runs)
+    if run is None:
+        return PENDING
+    try:
+        levels = [float(word) for word in thresholds]
+    except ValueError:
+        raise FigureError(f"<!-- curve:{name} {' '.join(thresholds)} --> is not a marker: its thresholds are "
+                          "numbers") from None
+    try:
+        rows = read_rows(run / "metrics.csv")
+        means = [(int(row["generation"]), float(row["return_mean"])) for row in rows]
+        last = rows[-LAST_GENERATIONS:]
+        population = [float(row["return_mean"]) for row in last]
+        centre = [float(row["center_return"]) for row in last]
+    except (OSError, KeyError, ValueError) as error:
+        raise FigureError(f"{name}: {run / 'metrics.csv'} holds no training curve ({type(error).__name__}: "
+                          f"{error})") from None
+    passed = []
+    for word, level in zip(thresholds, levels, strict=True):
+        generation = next((generation for generation, mean in means if mean > level), None)
+        passed.append(f"{word} at generation {generation}" if generation is not None else f"never {word}")
+    crossings = passed[0] if len(passed) == 1 else ", ".join(passed[:-1]) + " and " + passed[-1]
+    return (f"the population's mean return passed {crossings}, and stayed between {number(min(population))} and "
+            f"{number(max(population))} over the last {len(last)} generations, while the centre's own training "
+            f"episode scored {number(min(centre))} to {number(max(centre))} in them")
+
+
 def frames(name: str, page: Path, runs: Path = RUNS) -> str:
     run = evaluated(name, runs)
     if run is None or not (run / "frames.png").is_file():

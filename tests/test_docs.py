@@ -758,6 +758,17 @@ def test_a_campaign_result_is_rendered_from_its_evaluation(evaluated_runs):
         made_up["steps"] = [3]
         with pytest.raises(generate.FigureError, match="1 episode lengths for 5 returns"):
             generate.runs_files.lengths("x", None, page)
+    # the curve: the first generation whose population mean passed each threshold, the last generations' ranges
+    with open(run / "metrics.csv", newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    means, centres = [float(row["return_mean"]) for row in rows], [float(row["center_return"]) for row in rows]
+    marker = "<!-- curve:carracing_hebbian_seed1 -1e9 1e9 -->{}<!-- end curve -->"
+    assert generate.render(marker.format("old"), page, runs=evaluated_runs) == marker.format(
+        f"the population's mean return passed -1e9 at generation 1 and never 1e9, and stayed between "
+        f"{number(min(means))} and {number(max(means))} over the last {len(rows)} generations, while the centre's own "
+        f"training episode scored {number(min(centres))} to {number(max(centres))} in them")
+    with pytest.raises(generate.FigureError, match="its thresholds are numbers"):
+        generate.render("<!-- curve:carracing_hebbian_seed1 high --><!-- end curve -->", page, runs=evaluated_runs)
     # the best centre: the first generation of metrics.csv with the highest centre return, evaluated on the same seeds
     with open(run / "metrics.csv", newline="") as handle:
         top = max(csv.DictReader(handle), key=lambda row: float(row["center_return"]))
