@@ -97,6 +97,9 @@ MARKERS: dict[str, Marker] = {
         "RUN [ENVIRONMENT]", (1, 2), "how long a campaign run's evaluation episodes lasted: all of one length, or "
         "how many last the longest and what they score, and the others' lengths and median return",
         one_run(runs_files.lengths), pending=runs_files.PENDING),
+    "lowest": Marker(
+        "RUN [ENVIRONMENT]", (1, 2), "a campaign run's lowest evaluation episode: its seed, its return and its "
+        "length", one_run(runs_files.lowest), pending=runs_files.PENDING),
     "curve": Marker(
         "RUN THRESHOLD [THRESHOLD ...]", tuple(range(2, 10)), "how an evaluated campaign run trained: the first "
         "generation its population's mean return passed each threshold, and the range of that mean and of the "

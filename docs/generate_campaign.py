@@ -171,6 +171,24 @@ def lengths(name: str, environment: str | None, page: Path, runs: Path = RUNS) -
             f"with a median return of {number(float(np.median(returns[short])))}")
 
 
+def lowest(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
+    """A campaign run's lowest evaluation episode: "the lowest, on seed 2³¹ + 97, scores 79.3 and ends at step 150"
+    (its seed as an offset from the held-out seeds' start, where it is one of them)."""
+    found = evaluation_of(name, environment, runs)
+    if found is None:
+        return PENDING
+    run, _, entry = found
+    try:
+        returns, seeds, steps = entry["returns"], entry["seeds"], entry["steps"]
+        worst = min(range(len(returns)), key=returns.__getitem__)
+        seed, score, length = int(seeds[worst]), float(returns[worst]), int(steps[worst])
+    except (KeyError, TypeError, ValueError, IndexError) as error:
+        raise FigureError(f"{name}: {run / 'evaluation.json'} holds no returns with their seeds and lengths "
+                          f"({type(error).__name__}: {error})") from None
+    shown = f"2³¹ + {seed - HELD_OUT_SEED}" if seed >= HELD_OUT_SEED else str(seed)
+    return f"the lowest, on seed {shown}, scores {number(score)} and ends at step {length}"
+
+
 LAST_GENERATIONS = 50  # the stretch of a run's end a curve marker sums up
 
 

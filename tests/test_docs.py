@@ -758,6 +758,12 @@ def test_a_campaign_result_is_rendered_from_its_evaluation(evaluated_runs):
         made_up["steps"] = [3]
         with pytest.raises(generate.FigureError, match="1 episode lengths for 5 returns"):
             generate.runs_files.lengths("x", None, page)
+    # the lowest episode: its seed as an offset from 2**31, its return and its length
+    worst = min(range(len(returns)), key=returns.__getitem__)
+    marker = "<!-- lowest:carracing_hebbian_seed1 -->{}<!-- end lowest -->"
+    assert generate.render(marker.format("old"), page, runs=evaluated_runs) == marker.format(
+        f"the lowest, on seed 2³¹ + {entry['seeds'][worst] - 2**31}, scores {number(returns[worst])} and ends at "
+        f"step {entry['steps'][worst]}")
     # the curve: the first generation whose population mean passed each threshold, the last generations' ranges
     with open(run / "metrics.csv", newline="") as handle:
         rows = list(csv.DictReader(handle))
