@@ -100,6 +100,9 @@ MARKERS: dict[str, Marker] = {
     "lowest": Marker(
         "RUN [ENVIRONMENT]", (1, 2), "a campaign run's lowest evaluation episode: its seed, its return and its "
         "length", one_run(runs_files.lowest), pending=runs_files.PENDING),
+    "forward": Marker(
+        "RUN [ENVIRONMENT]", (1, 2), "how far a campaign run's ant walked toward +x in its evaluation, mean ± std",
+        one_run(runs_files.forward), pending=runs_files.PENDING),
     "curve": Marker(
         "RUN THRESHOLD [THRESHOLD ...]", tuple(range(2, 10)), "how an evaluated campaign run trained: the first "
         "generation its population's mean return passed each threshold, and the range of that mean and of the "

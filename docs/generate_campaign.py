@@ -144,7 +144,7 @@ def spread(name: str, environment: str | None, page: Path, runs: Path = RUNS) ->
 def lengths(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
     """How long one campaign run's evaluation episodes lasted, in steps as ``evaluation.json`` counts them (a
     burn-in included): "every one of its 100 episodes ends at step 1000"; "54 of its 100 episodes last 1000 steps,
-    the longest, and score 651–889; the other 46 end at steps 150–997 (median 734), with a median return of 514";
+    the longest, and score 651 to 889; the other 46 end at steps 150–997 (median 734), with a median return of 514";
     or, where no two episodes share the longest length, "its 100 episodes end at steps 242–251 (median 243)"."""
     found = evaluation_of(name, environment, runs)
     if found is None:
@@ -165,10 +165,11 @@ def lengths(name: str, environment: str | None, page: Path, runs: Path = RUNS) -
     if full.sum() < 2:  # no common longest length: the range
         return (f"its {steps.size} episodes end at steps {int(steps.min())}–{longest} "
                 f"(median {number(float(np.median(steps)))})")
+    kept, cut = returns[full], steps[short]
     return (f"{int(full.sum())} of its {steps.size} episodes last {longest} steps, the longest, and score "
-            f"{number(returns[full].min())}–{number(returns[full].max())}; the other {int(short.sum())} end at steps "
-            f"{int(steps[short].min())}–{int(steps[short].max())} (median {number(float(np.median(steps[short])))}), "
-            f"with a median return of {number(float(np.median(returns[short])))}")
+            f"{number(kept.min())} to {number(kept.max())}; the other {int(short.sum())} end at steps "
+            f"{int(cut.min())}–{int(cut.max())} (median {number(float(np.median(cut)))}), with a median return of "
+            f"{number(float(np.median(returns[short])))}")
 
 
 def lowest(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
@@ -187,6 +188,20 @@ def lowest(name: str, environment: str | None, page: Path, runs: Path = RUNS) ->
                           f"({type(error).__name__}: {error})") from None
     shown = f"2³¹ + {seed - HELD_OUT_SEED}" if seed >= HELD_OUT_SEED else str(seed)
     return f"the lowest, on seed {shown}, scores {number(score)} and ends at step {length}"
+
+
+def forward(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
+    """How far a campaign run's ant walked toward +x in its evaluation, mean ± std over the episodes: "17.0 ± 0.4 m
+    forward" (``forward`` in ``evaluation.json``, which the ants' evaluations record)."""
+    found = evaluation_of(name, environment, runs)
+    if found is None:
+        return PENDING
+    run, _, entry = found
+    try:
+        return f"{number(entry['forward_mean'])} ± {number(entry['forward_std'])} m forward"
+    except (KeyError, TypeError, ValueError) as error:
+        raise FigureError(f"{name}: {run / 'evaluation.json'} holds no forward distance (an ant's evaluation "
+                          f"records it; {type(error).__name__}: {error})") from None
 
 
 LAST_GENERATIONS = 50  # the stretch of a run's end a curve marker sums up

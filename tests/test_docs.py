@@ -751,13 +751,19 @@ def test_a_campaign_result_is_rendered_from_its_evaluation(evaluated_runs):
     made_up = {"steps": [1000, 150, 1000, 997, 400], "returns": [651.0, 79.25, 889.0, 514.0, 200.0]}
     with mock.patch.object(generate.runs_files, "evaluation_of", return_value=(run, {}, made_up)):
         assert generate.runs_files.lengths("x", None, page) == (
-            "2 of its 5 episodes last 1000 steps, the longest, and score 651–889; the other 3 end at steps 150–997 "
+            "2 of its 5 episodes last 1000 steps, the longest, and score 651 to 889; the other 3 end at steps 150–997 "
             "(median 400), with a median return of 200")
         made_up["steps"][2] = 999
         assert generate.runs_files.lengths("x", None, page) == "its 5 episodes end at steps 150–1000 (median 997)"
         made_up["steps"] = [3]
         with pytest.raises(generate.FigureError, match="1 episode lengths for 5 returns"):
             generate.runs_files.lengths("x", None, page)
+    # an ant's forward distance; a run without one (CarRacing's) is refused, naming the file
+    ant = {"forward_mean": 16.61, "forward_std": 0.767, "returns": [1.0], "steps": [1]}
+    with mock.patch.object(generate.runs_files, "evaluation_of", return_value=(run, {}, ant)):
+        assert generate.runs_files.forward("x", None, page) == "16.6 ± 0.767 m forward"
+    with pytest.raises(generate.FigureError, match="holds no forward distance"):
+        generate.render("<!-- forward:carracing_hebbian_seed1 --><!-- end forward -->", page, runs=evaluated_runs)
     # the lowest episode: its seed as an offset from 2**31, its return and its length
     worst = min(range(len(returns)), key=returns.__getitem__)
     marker = "<!-- lowest:carracing_hebbian_seed1 -->{}<!-- end lowest -->"
