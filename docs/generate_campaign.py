@@ -141,23 +141,35 @@ def spread(name: str, environment: str | None, page: Path, runs: Path = RUNS) ->
             f"quarters of the mean ({number(floor)})")
 
 
-def lengths(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
+def of_evaluation(holds: str):
+    """A campaign run's marker rendered from its evaluation's entry for the environment: ``render(entry)``, pending
+    until the run is evaluated, and refused, naming the file and ``holds``, where the entry lacks what it reads."""
+    def wrap(render):
+        def marker(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
+            found = evaluation_of(name, environment, runs)
+            if found is None:
+                return PENDING
+            run, _, entry = found
+            try:
+                return render(entry)
+            except (KeyError, TypeError, ValueError, IndexError) as error:
+                raise FigureError(f"{name}: {run / campaign.EVALUATION} holds no {holds} "
+                                  f"({type(error).__name__}: {error})") from None
+        marker.__doc__ = render.__doc__
+        return marker
+    return wrap
+
+
+@of_evaluation("episode lengths with their returns")
+def lengths(entry: dict) -> str:
     """How long one campaign run's evaluation episodes lasted, in steps as ``evaluation.json`` counts them (a
     burn-in included): "every one of its 100 episodes ends at step 1000"; "54 of its 100 episodes last 1000 steps,
     the longest, and score 651 to 889; the other 46 end at steps 150–997 (median 734), with a median return of 514";
     or, where no two episodes share the longest length, "its 100 episodes end at steps 242–251 (median 243)"."""
-    found = evaluation_of(name, environment, runs)
-    if found is None:
-        return PENDING
-    run, _, entry = found
-    try:
-        steps = np.asarray(entry["steps"], dtype=np.int64)
-        returns = np.asarray(entry["returns"], dtype=np.float64)
-        if steps.size == 0 or steps.shape != returns.shape:
-            raise ValueError(f"{steps.size} episode lengths for {returns.size} returns")
-    except (KeyError, TypeError, ValueError) as error:
-        raise FigureError(f"{name}: {run / 'evaluation.json'} holds no episode lengths with their returns "
-                          f"({type(error).__name__}: {error})") from None
+    steps = np.asarray(entry["steps"], dtype=np.int64)
+    returns = np.asarray(entry["returns"], dtype=np.float64)
+    if steps.size == 0 or steps.shape != returns.shape:
+        raise ValueError(f"{steps.size} episode lengths for {returns.size} returns")
     longest = int(steps.max())
     full, short = steps == longest, steps < longest
     if not short.any():
@@ -172,36 +184,22 @@ def lengths(name: str, environment: str | None, page: Path, runs: Path = RUNS) -
             f"{number(float(np.median(returns[short])))}")
 
 
-def lowest(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
+@of_evaluation("returns with their seeds and lengths")
+def lowest(entry: dict) -> str:
     """A campaign run's lowest evaluation episode: "the lowest, on seed 2³¹ + 97, scores 79.3 and ends at step 150"
     (its seed as an offset from the held-out seeds' start, where it is one of them)."""
-    found = evaluation_of(name, environment, runs)
-    if found is None:
-        return PENDING
-    run, _, entry = found
-    try:
-        returns, seeds, steps = entry["returns"], entry["seeds"], entry["steps"]
-        worst = min(range(len(returns)), key=returns.__getitem__)
-        seed, score, length = int(seeds[worst]), float(returns[worst]), int(steps[worst])
-    except (KeyError, TypeError, ValueError, IndexError) as error:
-        raise FigureError(f"{name}: {run / 'evaluation.json'} holds no returns with their seeds and lengths "
-                          f"({type(error).__name__}: {error})") from None
+    returns = entry["returns"]
+    worst = min(range(len(returns)), key=returns.__getitem__)
+    seed, score, length = int(entry["seeds"][worst]), float(returns[worst]), int(entry["steps"][worst])
     shown = f"2³¹ + {seed - HELD_OUT_SEED}" if seed >= HELD_OUT_SEED else str(seed)
     return f"the lowest, on seed {shown}, scores {number(score)} and ends at step {length}"
 
 
-def forward(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
+@of_evaluation("forward distance, which an ant's evaluation records")
+def forward(entry: dict) -> str:
     """How far a campaign run's ant walked toward +x in its evaluation, mean ± std over the episodes: "17.0 ± 0.4 m
-    forward" (``forward`` in ``evaluation.json``, which the ants' evaluations record)."""
-    found = evaluation_of(name, environment, runs)
-    if found is None:
-        return PENDING
-    run, _, entry = found
-    try:
-        return f"{number(entry['forward_mean'])} ± {number(entry['forward_std'])} m forward"
-    except (KeyError, TypeError, ValueError) as error:
-        raise FigureError(f"{name}: {run / 'evaluation.json'} holds no forward distance (an ant's evaluation "
-                          f"records it; {type(error).__name__}: {error})") from None
+    forward" (``forward`` in ``evaluation.json``)."""
+    return f"{number(entry['forward_mean'])} ± {number(entry['forward_std'])} m forward"
 
 
 LAST_GENERATIONS = 50  # the stretch of a run's end a curve marker sums up
