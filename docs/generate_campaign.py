@@ -122,25 +122,6 @@ def best(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> s
                           f"({type(error).__name__}: {error})") from None
 
 
-def spread(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
-    """How one campaign run's evaluation returns spread: "median 905, quartiles 888–915, lowest 106, highest 936;
-    4 of 100 episodes below three quarters of the mean (650)" (numpy's percentiles, linear)."""
-    found = evaluation_of(name, environment, runs)
-    if found is None:
-        return PENDING
-    run, _, entry = found
-    try:
-        returns = np.asarray(entry["returns"], dtype=np.float64)
-        low, median, high = np.percentile(returns, [25, 50, 75])
-        floor = 0.75 * returns.mean()
-    except (KeyError, TypeError, ValueError, IndexError) as error:
-        raise FigureError(f"{name}: {run / 'evaluation.json'} holds no returns ({type(error).__name__}: {error})") \
-            from None
-    return (f"median {number(median)}, quartiles {number(low)}–{number(high)}, lowest {number(returns.min())}, "
-            f"highest {number(returns.max())}; {int((returns < floor).sum())} of {returns.size} episodes below three "
-            f"quarters of the mean ({number(floor)})")
-
-
 def of_evaluation(holds: str):
     """A campaign run's marker rendered from its evaluation's entry for the environment: ``render(entry)``, pending
     until the run is evaluated, and refused, naming the file and ``holds``, where the entry lacks what it reads."""
@@ -158,6 +139,18 @@ def of_evaluation(holds: str):
         marker.__doc__ = render.__doc__
         return marker
     return wrap
+
+
+@of_evaluation("returns")
+def spread(entry: dict) -> str:
+    """How one campaign run's evaluation returns spread: "median 905, quartiles 888–915, lowest 106, highest 936;
+    4 of 100 episodes below three quarters of the mean (650)" (numpy's percentiles, linear)."""
+    returns = np.asarray(entry["returns"], dtype=np.float64)
+    low, median, high = np.percentile(returns, [25, 50, 75])
+    floor = 0.75 * returns.mean()
+    return (f"median {number(median)}, quartiles {number(low)}–{number(high)}, lowest {number(returns.min())}, "
+            f"highest {number(returns.max())}; {int((returns < floor).sum())} of {returns.size} episodes below three "
+            f"quarters of the mean ({number(floor)})")
 
 
 @of_evaluation("episode lengths with their returns")
