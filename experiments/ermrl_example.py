@@ -57,7 +57,8 @@ def parse(argv: list[str]) -> argparse.Namespace:
     parser.add_argument("--training_steps", type=positive_int, default=50000, help="PPO steps of each tested model")
     parser.add_argument("--seeds", nargs="+", type=seed_value, default=[0, 1], metavar="SEED",
                         help="the test's seeds; the published input is tested on the first")
-    parser.add_argument("--folder", type=Path, default=ROOT / "runs" / "ermrl_example")
+    parser.add_argument("--folder", type=records.writable_folder, default=ROOT / "runs" / "ermrl_example",
+                        help="where the scripts run and keep their files (made where it is missing)")
     parser.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
     parser.add_argument("--record", type=records.writable_folder, default=None, metavar="FOLDER",
                         help="also write the results as a record (benchmarks/record.py, not timed: seeded PPO "
@@ -125,10 +126,15 @@ class Example:
         (the study has grown since) is not replaced: it stops the example."""
         if not summary.is_file():
             return None
-        found = json.loads(summary.read_text())
+        try:
+            found = json.loads(summary.read_text())
+            tested = (found["trial"], found["fitness"])
+        except (OSError, ValueError, KeyError, TypeError) as error:
+            raise UserError(f"{summary} is not a summary test.py wrote ({type(error).__name__}: {error}); move it "
+                            "away to test again") from None
         trials = self.trials(h_test)
         best = max(trials, key=lambda trial: trial.value) if trials else None
-        if best is None or (found["trial"], found["fitness"]) != (best.number, best.value):
+        if best is None or tested != (best.number, best.value):
             raise UserError(f"{summary} tested trial {found['trial']}, which is not the best trial of the study in "
                             f"{self.journal(h_test)} now; move {summary.parent} away to test it again, or give "
                             "another --folder")
@@ -167,7 +173,11 @@ class Example:
         self.run("published input", test_command(self.args, ACTION_FED, seed, published=True), folder)
 
     def all(self) -> None:
-        self.args.folder.mkdir(parents=True, exist_ok=True)
+        if not self.args.dry_run:
+            try:
+                self.args.folder.mkdir(parents=True, exist_ok=True)
+            except OSError as error:
+                raise UserError(f"--folder {self.args.folder}: cannot be made ({error.strerror})") from None
         self.evolve(ACTION_FED)
         for seed in self.args.seeds:
             self.test(ACTION_FED, seed)

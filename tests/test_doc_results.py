@@ -205,3 +205,21 @@ def test_ermrl_example_refuses_a_seed_twice(tmp_path):
                            "--folder", str(tmp_path)], capture_output=True, text=True, timeout=120)
     assert done.returncode == 2 and done.stderr.strip().splitlines()[-1].endswith("--seeds 0 0: each seed once")
     assert not any(tmp_path.iterdir())
+
+
+def test_ermrl_example_refuses_a_folder_it_cannot_make_and_a_broken_summary(tmp_path):
+    need("reservoirs")
+    blocked = tmp_path / "file"
+    blocked.write_text("")
+    done = subprocess.run([sys.executable, str(ROOT / "experiments" / "ermrl_example.py"), "--folder",
+                           str(blocked / "runs")], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and "--folder" in done.stderr.strip().splitlines()[-1]
+    summary = tmp_path / "runs" / "models" / "CartPole-v1_del_obs_demo" / "test_0k_steps_seed_0.json"
+    summary.parent.mkdir(parents=True)
+    summary.write_text("{")  # a summary cut short: refused, kept as it is
+    done = subprocess.run([sys.executable, str(ROOT / "experiments" / "ermrl_example.py"), "--nb_trials", "1",
+                           "--HP_training_steps", "64", "--training_steps", "64", "--seeds", "0", "--folder",
+                           str(tmp_path / "runs")], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 2, done.stderr
+    assert "is not a summary test.py wrote" in done.stderr.strip().splitlines()[-1]
+    assert summary.read_text() == "{"
