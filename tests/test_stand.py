@@ -29,16 +29,16 @@ def test_the_committed_page_is_what_the_files_give(capsys):
 
 
 def test_a_variant_changes_only_its_settings_and_names_its_runs_folder():
-    result = paper("ant", "static", "--variant", SIGMA, "--seed", "2", "--dry-run")
+    # seed 9: no committed run, whose config.json a dry run would read and resume instead of training anew
+    result = paper("ant", "static", "--variant", SIGMA, "--seed", "9", "--dry-run")
     assert result.returncode == 0, result.stderr
     train = result.stdout.splitlines()[0].split()
     assert train[0] == "$" and train[2:] == [
         "train_static.py", "--config", "experiments/paper/ant_static.toml", "--folder",
-        "results/paper/ant_static_sigma_seed2", "--sigma", "0.05", "--generations", "20", "--seed", "2"]
+        "results/paper/ant_static_sigma_seed9", "--sigma", "0.05", "--generations", "20", "--seed", "9"]
     evaluate = result.stdout.splitlines()[2]
-    assert "--episodes 20 " in evaluate and "results/paper/ant_static_sigma_seed2/" in evaluate
+    assert "--episodes 20 " in evaluate and "results/paper/ant_static_sigma_seed9/" in evaluate
     # a change of the episode's rules trains in them, and is evaluated in the paper's episodes
-    # (seed 9: no committed run, whose config.json a dry run would read, saying so, before its commands)
     result = paper("ant", "static", "--variant", "experiments/static_ant/no_burn_in.toml", "--seed", "9", "--dry-run")
     train, _, evaluate, _ = result.stdout.splitlines()
     assert ("--environment experiments.static_ant.no_burn_in:NoBurnInAntBulletEnv-v0,"
