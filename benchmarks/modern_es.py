@@ -16,7 +16,8 @@ that no update reads. A run already complete is not trained again; one cut short
 then evaluated by ``evaluate_static.py`` on ``--episodes`` episodes per body from seed 2**31, seeds no training
 episode uses. The record (``modern_es-<environment>``, not timed: a seeded run's returns are the same at any
 load) holds, per setting and body, the return and, for ants, the distance walked forward, each as mean ± std
-over the episodes, and the run's own last centre evaluation.
+over the episodes, and the run's own last centre evaluation; and, per setting, how its centre evaluations went
+(how many, how many below zero and below the one before; the first, highest and last).
 """
 
 from __future__ import annotations
@@ -85,19 +86,46 @@ def plus_minus(mean: float, std: float, unit: str = "") -> str:
     return f"{mean:,.1f} ± {std:,.1f}{unit}"
 
 
+def centre_evaluations(run: Path) -> list[tuple[int, float, float]]:
+    """The run's centre evaluations, in order: (generation, mean, std over its episodes), from metrics.csv."""
+    rows = files.read_metrics(run / "metrics.csv")
+    found = [(int(row["generation"]), float(row["center_eval_mean"]), float(row["center_eval_std"])) for row in rows]
+    return [(generation, mean, std) for generation, mean, std in found if not math.isnan(mean)]
+
+
 def centre_log(run: Path) -> str:
-    """The run's last centre evaluation (metrics.csv's last row with one), mean ± std over its episodes."""
-    for row in reversed(files.read_metrics(run / "metrics.csv")):
-        mean, std = float(row["center_eval_mean"]), float(row["center_eval_std"])
-        if not math.isnan(mean):
-            return f"{plus_minus(mean, std)} (generation {row['generation']})"
-    return "–"
+    """The run's last centre evaluation, mean ± std over its episodes."""
+    evaluations = centre_evaluations(run)
+    if not evaluations:
+        return "–"
+    generation, mean, std = evaluations[-1]
+    return f"{plus_minus(mean, std)} (generation {generation})"
+
+
+CENTRE_COLUMNS = ["settings", "evaluations", "below zero", "lower than the one before", "first", "highest", "last"]
+
+
+def centre_row(setting: str, run: Path) -> list:
+    """How the run's centre evaluations went: how many, how many below zero and below the one before, and its
+    first, highest and last mean return, each with its generation."""
+    evaluations = centre_evaluations(run)
+    means = [mean for _, mean, _ in evaluations]
+
+    def at(generation: int, mean: float) -> str:
+        return f"{mean:,.1f} (generation {generation})"
+
+    if not evaluations:
+        return [setting, 0, 0, 0, "–", "–", "–"]
+    highest = max(evaluations, key=lambda evaluation: evaluation[1])  # the first of equal highs
+    return [setting, len(means), sum(mean < 0 for mean in means),
+            sum(later < earlier for earlier, later in zip(means, means[1:])), at(*evaluations[0][:2]),
+            at(*highest[:2]), at(*evaluations[-1][:2])]
 
 
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
     record = Record(f"modern_es-{args.environment.replace(',', '+')}", timed=False)
-    rows, columns = [], None
+    rows, columns, centres = [], None, []
     for setting in SETTINGS:
         try:
             run = train(args, setting)
@@ -117,9 +145,11 @@ def main(argv: list[str] | None = None) -> int:
                 cells.append(plus_minus(body["forward_mean"], body["forward_std"], " m"))
         columns = columns or ["settings", *heads, "the run's own last centre evaluation (10 episodes)"]
         rows.append([setting, *cells, centre_log(run)])
+        centres.append(centre_row(setting, run))
         record.note(f"{setting}_run", {"folder": str(run), "command": files.read_json(run / "config.json").get(
             "command"), "mean_return": statistics.fmean(b["mean"] for b in evaluation["environments"])})
     record.table("results", columns, rows)
+    record.table("centre", CENTRE_COLUMNS, centres)
     record.note("protocol", {"environment": args.environment, "popsize": args.popsize,
                              "generations": args.generations, "seed": args.seed, "episodes": args.episodes,
                              "first_evaluation_seed": HELD_OUT, "settings": SETTINGS,

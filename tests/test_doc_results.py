@@ -103,12 +103,44 @@ def test_modern_es_record_is_the_evaluations_of_the_two_runs(tmp_path):
         assert record["measures"][f"{setting}_Ant-v5_return"]["values"] == ant["returns"]
         last = (run_dir / "metrics.csv").read_text().splitlines()[-1].split(",")
         assert row[5].endswith("(generation 5)") and last[0] == "5"
+        # the centre's evaluations, read from metrics.csv by a plain loop
+        header, *lines = (run_dir / "metrics.csv").read_text().splitlines()
+        columns = header.split(",")
+        logged = []
+        for line in lines:
+            cells = dict(zip(columns, line.split(","), strict=True))
+            if cells["center_eval_mean"] not in ("", "nan"):
+                logged.append((int(cells["generation"]), float(cells["center_eval_mean"])))
+        assert [generation for generation, _ in logged] == [5]  # --eval_every 5, 5 generations
+        [generation, mean] = logged[0]
+        shown = f"{mean:,.1f} (generation {generation})"
+        assert record["notes"]["centre"]["rows"][("faithful", "modern").index(setting)] == [
+            setting, 1, int(mean < 0), 0, shown, shown, shown]
     trained = run_files(folder)
     again = run("modern_es.py", *args, "--results", str(tmp_path / "again"), cwd=tmp_path)
     assert again.returncode == 0, again.stderr
     assert {path: stamp for path, stamp in run_files(folder).items() if "evaluation" not in path.name} == {
         path: stamp for path, stamp in trained.items() if "evaluation" not in path.name}
     assert record_of(tmp_path / "again")["notes"]["results"] == table
+    assert record_of(tmp_path / "again")["notes"]["centre"] == record["notes"]["centre"]
+
+
+def test_modern_es_centre_row_counts_as_a_plain_loop_does(tmp_path):
+    """Several evaluations: below zero, lower than the one before, and the first of equal highs; a generation
+    without an evaluation (nan) is not one."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import modern_es
+
+    evaluations = [(5, -3.0, 1.0), (10, 7.5, 0.5), (15, 2.0, 0.1), (20, 7.5, 0.0), (25, -1.0, 2.0)]
+    lines = [f"{generation},{mean},{std}" for generation, mean, std in evaluations] + ["26,nan,nan"]
+    (tmp_path / "metrics.csv").write_text("generation,center_eval_mean,center_eval_std\n" + "\n".join(lines) + "\n")
+    below = falls = 0
+    for index, (_, mean, _) in enumerate(evaluations):
+        below += mean < 0
+        falls += index > 0 and mean < evaluations[index - 1][1]
+    assert (below, falls) == (2, 2)
+    assert modern_es.centre_row("modern", tmp_path) == [
+        "modern", 5, below, falls, "-3.0 (generation 5)", "7.5 (generation 10)", "-1.0 (generation 25)"]
 
 
 def test_compare_records_its_table(tmp_path):
