@@ -80,6 +80,10 @@ MARKERS: dict[str, Marker] = {
         "RECORD KEY", (2,), "the table KEY a benchmark wrote into its record, estimates with their intervals, then "
         "the machine, linked", lambda words, where: records_files.record_table(*words, where.page, where.results),
         block=True),
+    "intervals": Marker(
+        "RECORD KEY", (2,), "for each probability P(X > Y) of the table KEY of a record: the rows whose 95 % "
+        "interval lies above a half, holds a half, lies below it", lambda words, where:
+        records_files.half_intervals(*words, where.page, where.results)),
     "result": Marker(
         "RUN [ENVIRONMENT]", (1, 2), "a campaign run's evaluation: mean ± std, episodes, generation, hours of "
         "training and machines, linked to the file and the weights", one_run(runs_files.result),

@@ -89,3 +89,34 @@ def record_table(name: str, key: str, page: Path, results: Path = records.RESULT
     lines += ["| " + " | ".join(table_cell(value) for value in row) + " |" for row in table["rows"]]
     link = Path(os.path.relpath(path, page.parent)).as_posix()
     return "\n".join(lines) + f"\n\n[{record['cpu']}, {record['cores']} cores, {record['date'][:10]}]({link})\n"
+
+
+def listed(names: list[str]) -> str:
+    """"a", "a and b", "a, b and c"."""
+    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+
+
+def half_intervals(name: str, key: str, page: Path, results: Path = records.RESULTS) -> str:
+    """What the table KEY of the command's newest record says of each of its probabilities, the columns headed
+    "P(X > Y)": the rows whose 95 % interval lies above a half, holds a half, lies below it. An interval that holds
+    a half ranks nothing; one wholly above (below) a half says X is likelier to score higher (lower) than Y."""
+    found = published(name, results, lambda record: isinstance(record.get("notes", {}).get(key), dict))
+    if found is None:
+        raise FigureError(f"{name}: no table {key!r} in its notes")
+    table = found[1]["notes"][key]
+    sentences = []
+    for index, column in enumerate(table["columns"]):
+        if not column.startswith("P("):
+            continue
+        estimates = [(row[0], row[index]) for row in table["rows"] if isinstance(row[index], dict)]
+        groups: dict[str, list[str]] = {"lies above a half": [], "holds a half": [], "lies below a half": []}
+        for row, value in estimates:
+            groups["lies above a half" if value["low"] > 0.5 else "lies below a half" if value["high"] < 0.5
+                   else "holds a half"].append(str(row))
+        whole = len(estimates) == len(table["rows"]) > 1  # every row has an estimate: "every strategy"
+        parts = [f"{where} for " + (f"every {table['columns'][0]}" if whole and len(rows) == len(estimates)
+                                    else listed(rows)) for where, rows in groups.items() if rows]
+        sentences.append(f"The interval of {column.split(' [')[0]} " + "; ".join(parts) + ".")
+    if not sentences:
+        raise FigureError(f"{name}: the table {key!r} has no column P(X > Y)")
+    return " ".join(sentences)

@@ -674,6 +674,30 @@ def test_a_records_table_is_rendered_with_its_intervals_and_machine(tmp_path):
         generate.render("<!-- table:solve settings -->\n<!-- end table -->", page, results=tmp_path)
 
 
+def test_a_tables_probabilities_are_said_from_its_record(tmp_path):
+    """<!-- intervals:RECORD KEY -->: for each P(X > Y) column, the rows whose interval lies above a half, holds
+    one, lies below it (a row without an estimate, the reference, is in none); a table without one is refused."""
+    path = a_record(tmp_path, "compare")
+    body = json.loads(path.read_text())
+    p = [(0.9, 0.6, 1.0), (0.5, 0.2, 0.8), (0.1, 0.0, 0.4), (0.7, 0.5, 0.9)]
+    body["notes"]["results"] = {"columns": ["strategy", "IQM", "P(X > a) [95 % CI]"], "rows": [
+        ["a", {"value": 3.0, "low": 0.7, "high": 9.0, "digits": 1}, "—"]] + [
+        [name, {"value": 1.0, "low": 0.6, "high": 2.0, "digits": 1}, {"value": v, "low": lo, "high": hi, "digits": 2}]
+        for name, (v, lo, hi) in zip("bcde", p, strict=True)]}
+    body["notes"]["plain"] = {"columns": ["strategy", "IQM"], "rows": [["a", 1.0]]}
+    path.write_text(json.dumps(body))
+    page = ROOT / "docs" / "strategies.md"
+    text = "<!-- intervals:compare results -->old<!-- end intervals -->"
+    assert generate.render(text, page, results=tmp_path) == (
+        "<!-- intervals:compare results -->The interval of P(X > a) lies above a half for b; holds a half for c and "
+        "e; lies below a half for d.<!-- end intervals -->")
+    body["notes"]["results"]["rows"] = [row for row in body["notes"]["results"]["rows"] if row[0] in "ce"]
+    path.write_text(json.dumps(body))
+    assert "holds a half for every strategy." in generate.render(text, page, results=tmp_path)
+    with pytest.raises(generate.FigureError, match=re.escape("compare: the table 'plain' has no column P(X > Y)")):
+        generate.render("<!-- intervals:compare plain --><!-- end intervals -->", page, results=tmp_path)
+
+
 @pytest.fixture(scope="module")
 def evaluated_runs(tmp_path_factory) -> Path:
     """A folder of campaign runs as experiments/paper.py leaves them: one small CarRacing run, trained and
