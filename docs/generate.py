@@ -104,6 +104,9 @@ MARKERS: dict[str, Marker] = {
     "lowest": Marker(
         "RUN [ENVIRONMENT]", (1, 2), "a campaign run's lowest evaluation episode: its seed, its return and its "
         "length", one_run(runs_files.lowest), pending=runs_files.PENDING),
+    "first": Marker(
+        "RUN [ENVIRONMENT]", (1, 2), "a campaign run's first evaluation episode, the one its frames.png shows: its "
+        "length and its return", one_run(runs_files.first), pending=runs_files.PENDING),
     "forward": Marker(
         "RUN [ENVIRONMENT]", (1, 2), "how far a campaign run's ant walked toward +x in its evaluation, mean ± std",
         one_run(runs_files.forward), pending=runs_files.PENDING),

@@ -188,6 +188,12 @@ def lowest(entry: dict) -> str:
     return f"the lowest, on seed {shown}, scores {number(score)} and ends at step {length}"
 
 
+@of_evaluation("returns with their lengths")
+def first(entry: dict) -> str:
+    """A campaign run's first evaluation episode, the one its frames.png shows: "734 steps, return 912"."""
+    return f"{int(entry['steps'][0])} steps, return {number(float(entry['returns'][0]))}"
+
+
 @of_evaluation("forward distance, which an ant's evaluation records")
 def forward(entry: dict) -> str:
     """How far a campaign run's ant walked toward +x in its evaluation, mean ± std over the episodes: "17.0 ± 0.4 m

@@ -794,6 +794,10 @@ def test_a_campaign_result_is_rendered_from_its_evaluation(evaluated_runs):
     assert generate.render(marker.format("old"), page, runs=evaluated_runs) == marker.format(
         f"the lowest, on seed 2³¹ + {entry['seeds'][worst] - 2**31}, scores {number(returns[worst])} and ends at "
         f"step {entry['steps'][worst]}")
+    # the first episode, the one frames.png shows: its length and its return
+    marker = "<!-- first:carracing_hebbian_seed1 -->{}<!-- end first -->"
+    assert generate.render(marker.format("old"), page, runs=evaluated_runs) == marker.format(
+        f"{entry['steps'][0]} steps, return {number(returns[0])}")
     # the curve: the first generation whose population mean passed each threshold, the last generations' ranges
     with open(run / "metrics.csv", newline="") as handle:
         rows = list(csv.DictReader(handle))
