@@ -14,9 +14,9 @@ clone on another machine continues it bit for bit (docs/experiments.md, "The cam
 - **Interrupts.** SIGINT or SIGTERM to this process is passed on as a first SIGINT; if the child has not
   ended within ``GRACE`` seconds, or at a second signal, it is stopped at once. So the campaign is
   saved and gone within a minute of one SIGINT.
-- **The pid file.** While a chunk runs, ``results/paper/campaign.pid`` holds this process's id (what a
-  session's before-stop hook signals); it is removed when the chunk ends. A live campaign's file is
-  never taken over: a second campaign is refused, with the command that stops the first. The file is
+- **The pid file.** While a chunk runs, ``results/paper/campaign.pid`` holds this process's id (what a job
+  scheduler or a shutdown script can signal to stop it cleanly); it is removed when the chunk ends. A live
+  campaign's file is never taken over: a second campaign is refused, with the command that stops the first. The file is
   data (``holder``): one naming a process that has ended is taken over, and one this tool did not
   write (not a process id, or the id of a live process that is not a campaign: pid 1, an id reused)
   is refused with how to remove it; the tool never advises signalling a process that is not a campaign.
