@@ -49,7 +49,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:  # run as a script
     sys.path.insert(0, str(ROOT))
-from experiments.pages import covered, runs_line, settle  # noqa: E402  (after the repository's root is on the path)
+from experiments import stand  # noqa: E402  (after the repository's root is on the path)
+from experiments.pages import covered, runs_line, settle  # noqa: E402
 
 RUNS = ROOT / "results" / "paper"
 PAGE_NAME = "REPLICATION.md"
@@ -542,7 +543,8 @@ def render(runs_root: Path = RUNS, records: Path = ORIGINAL_RECORDS) -> str:
         "quadruped's batched class returns pyBullet's (tests/test_bullet_locomotion.py, with an AVX2 CPU's code, "
         "which the batched class computes as on every CPU).",
         "- **What makes a static ant stand**: the paper's static ant with one setting changed at a time, each "
-        "change over three seeds, against the paper's runs over the same generations ([STATIC_ANT.md](STATIC_ANT.md)).",
+        "change over three seeds, against the paper's runs over the same generations ([STATIC_ANT.md](STATIC_ANT.md)): "
+        + stand.answer(stand.runs_in(runs_root)),
         "- **The compute each run took**, from its metrics.csv (wall-clock hours times the workers):",
         *("  " + line for line in compute_lines(runs)), "",
         "### The environment the original ran", "",

@@ -169,8 +169,20 @@ def figure(runs: list[Run], path: Path) -> None:
     plt.close(fig)
 
 
+def runs_in(runs_root: Path) -> list[Run]:
+    """The study's runs found in ``runs_root``, the paper's own among them."""
+    return [run for arm in arms() for seed in SEEDS if (run := read_run(arm, seed, runs_root))]
+
+
+def answer(found: list[Run]) -> str:
+    """The study's result in one sentence: its runs to come, or the changes that let more seeds stand."""
+    standing = {arm.name: sum(run.stands for run in found if run.arm == arm) for arm in arms()}
+    pending = [arm for arm in arms() for seed in SEEDS if not any(run.arm == arm and run.seed == seed for run in found)]
+    return result(standing, len(pending))
+
+
 def render(runs_root: Path) -> tuple[str, list[Run]]:
-    found = [run for arm in arms() for seed in SEEDS if (run := read_run(arm, seed, runs_root))]
+    found = runs_in(runs_root)
     rows = []
     for arm in arms():
         mine = [run for run in found if run.arm == arm]
@@ -179,7 +191,6 @@ def render(runs_root: Path) -> tuple[str, list[Run]]:
         evaluated = "; ".join(f"seed {run.seed}: {stood(run)}" for run in mine if run.evaluation is not None)
         rows.append(f"| {arm.name} | {arm.change} | {seeds or '—'} | {count} | {evaluated or '—'} |")
     spent = sum(run.core_hours for run in found if run.arm.name != "paper")
-    standing = {arm.name: sum(run.stands for run in found if run.arm == arm) for arm in arms()}
     pending = [f"{arm.name} seed {seed}" for arm in arms() for seed in SEEDS
                if not any(run.arm == arm and run.seed == seed for run in found)]
     lines = [
@@ -198,7 +209,7 @@ def render(runs_root: Path) -> tuple[str, list[Run]]:
         "on every training body), less the burn-in. An evaluated change adds its final centre's episodes in the "
         f"paper's own (the burn-in and the grace included) on its three bodies: how many lasted past step {FALLS_AT}, "
         "and their mean score.", "",
-        "**The result**: " + result(standing, len(pending)), "",
+        "**The result**: " + answer(found), "",
         "| change | in words | mean episode, generations "
         f"{GENERATIONS - LAST + 1}–{GENERATIONS}, by seed | runs that stand | final centre: episodes past step "
         f"{FALLS_AT} (mean score), by body |",
