@@ -13,7 +13,7 @@ import os
 from pathlib import Path
 
 import numpy as np
-from generate_records import FigureError, number
+from generate_records import FigureError, listed, number
 
 from cli.errors import USER_ERRORS
 from es.files import read_json
@@ -92,19 +92,6 @@ def result(name: str, environment: str | None, page: Path, runs: Path = RUNS) ->
             + (f" on {progress.machines}" if progress.machines else "") + f", [weights]({link(run, page)}))")
 
 
-def headline(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
-    """One campaign run's evaluation in a few characters, for a table of results: "[**867 ± 130**](evaluation.json)"."""
-    found = evaluation_of(name, environment, runs)
-    if found is None:
-        return PENDING
-    run, _, entry = found
-    try:
-        return f"[**{number(entry['mean'])} ± {number(entry['std'])}**]({link(run / campaign.EVALUATION, page)})"
-    except (KeyError, TypeError, ValueError) as error:
-        raise FigureError(f"{name}: {run / campaign.EVALUATION} holds no mean and spread "
-                          f"({type(error).__name__}: {error})") from None
-
-
 def best(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
     """One campaign run's best centre evaluated on the final centre's episodes: "**897 ± 61.2** (100 episodes on
     held-out seeds, the best centre: training return 921.5 at generation 248)"."""
@@ -122,9 +109,10 @@ def best(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> s
                           f"({type(error).__name__}: {error})") from None
 
 
-def of_evaluation(holds: str):
-    """A campaign run's marker rendered from its evaluation's entry for the environment: ``render(entry)``, pending
-    until the run is evaluated, and refused, naming the file and ``holds``, where the entry lacks what it reads."""
+def of_evaluation(holds: str, linked: bool = False):
+    """A campaign run's marker rendered from its evaluation's entry for the environment: ``render(entry)`` (with
+    ``linked``, as a link to the evaluation file), pending until the run is evaluated, and refused, naming the file
+    and ``holds``, where the entry lacks what it reads."""
     def wrap(render):
         def marker(name: str, environment: str | None, page: Path, runs: Path = RUNS) -> str:
             found = evaluation_of(name, environment, runs)
@@ -132,13 +120,20 @@ def of_evaluation(holds: str):
                 return PENDING
             run, _, entry = found
             try:
-                return render(entry)
+                text = render(entry)
             except (KeyError, TypeError, ValueError, IndexError) as error:
                 raise FigureError(f"{name}: {run / campaign.EVALUATION} holds no {holds} "
                                   f"({type(error).__name__}: {error})") from None
+            return f"[{text}]({link(run / campaign.EVALUATION, page)})" if linked else text
         marker.__doc__ = render.__doc__
         return marker
     return wrap
+
+
+@of_evaluation("mean and spread", linked=True)
+def headline(entry: dict) -> str:
+    """One campaign run's evaluation in a few characters, for a table of results: "[**867 ± 130**](evaluation.json)"."""
+    return f"**{number(entry['mean'])} ± {number(entry['std'])}**"
 
 
 @of_evaluation("returns")
@@ -231,8 +226,7 @@ def curve(name: str, thresholds: list[str], page: Path, runs: Path = RUNS) -> st
     for word, level in zip(thresholds, levels, strict=True):
         generation = next((generation for generation, mean in means if mean > level), None)
         passed.append(f"{word} at generation {generation}" if generation is not None else f"never {word}")
-    crossings = passed[0] if len(passed) == 1 else ", ".join(passed[:-1]) + " and " + passed[-1]
-    return (f"the population's mean return passed {crossings}, and stayed between {number(min(population))} and "
+    return (f"the population's mean return passed {listed(passed)}, and stayed between {number(min(population))} and "
             f"{number(max(population))} over the last {len(last)} generations, while the centre's own training "
             f"episode scored {number(min(centre))} to {number(max(centre))} in them")
 

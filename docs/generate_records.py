@@ -74,8 +74,8 @@ def table_cell(value) -> str:
     return cell(value)
 
 
-def record_table(name: str, key: str, page: Path, results: Path = records.RESULTS) -> str:
-    """A record's table (``Record.table``) in markdown, then its machine and date, linked to the record."""
+def recorded_table(name: str, key: str, results: Path) -> tuple[Path, dict]:
+    """The newest quiet record of the command ``name`` whose notes hold the table ``key``, and its path."""
     def holds(record: dict) -> bool:
         table = record.get("notes", {}).get(key)
         return isinstance(table, dict) and {"columns", "rows"} <= set(table)
@@ -83,7 +83,12 @@ def record_table(name: str, key: str, page: Path, results: Path = records.RESULT
     found = published(name, results, holds)
     if found is None:
         raise FigureError(f"{name}: no table {key!r} in its notes")
-    path, record = found
+    return found
+
+
+def record_table(name: str, key: str, page: Path, results: Path = records.RESULTS) -> str:
+    """A record's table (``Record.table``) in markdown, then its machine and date, linked to the record."""
+    path, record = recorded_table(name, key, results)
     table = record["notes"][key]
     lines = ["| " + " | ".join(map(cell, table["columns"])) + " |", "|" + "---|" * len(table["columns"])]
     lines += ["| " + " | ".join(table_cell(value) for value in row) + " |" for row in table["rows"]]
@@ -100,10 +105,7 @@ def half_intervals(name: str, key: str, page: Path, results: Path = records.RESU
     """What the table KEY of the command's newest record says of each of its probabilities, the columns headed
     "P(X > Y)": the rows whose 95 % interval lies above a half, holds a half, lies below it. An interval that holds
     a half ranks nothing; one wholly above (below) a half says X is likelier to score higher (lower) than Y."""
-    found = published(name, results, lambda record: isinstance(record.get("notes", {}).get(key), dict))
-    if found is None:
-        raise FigureError(f"{name}: no table {key!r} in its notes")
-    table = found[1]["notes"][key]
+    table = recorded_table(name, key, results)[1]["notes"][key]
     sentences = []
     for index, column in enumerate(table["columns"]):
         if not column.startswith("P("):
@@ -111,8 +113,13 @@ def half_intervals(name: str, key: str, page: Path, results: Path = records.RESU
         estimates = [(row[0], row[index]) for row in table["rows"] if isinstance(row[index], dict)]
         groups: dict[str, list[str]] = {"lies above a half": [], "holds a half": [], "lies below a half": []}
         for row, value in estimates:
-            groups["lies above a half" if value["low"] > 0.5 else "lies below a half" if value["high"] < 0.5
-                   else "holds a half"].append(str(row))
+            try:
+                where = ("lies above a half" if value["low"] > 0.5 else "lies below a half" if value["high"] < 0.5
+                         else "holds a half")
+            except (KeyError, TypeError) as error:
+                raise FigureError(f"{name}: the table {key!r} has an estimate of {column} without its interval "
+                                  f"({type(error).__name__}: {error})") from None
+            groups[where].append(str(row))
         whole = len(estimates) == len(table["rows"]) > 1  # every row has an estimate: "every strategy"
         parts = [f"{where} for " + (f"every {table['columns'][0]}" if whole and len(rows) == len(estimates)
                                     else listed(rows)) for where, rows in groups.items() if rows]

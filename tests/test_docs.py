@@ -696,6 +696,10 @@ def test_a_tables_probabilities_are_said_from_its_record(tmp_path):
     assert "holds a half for every strategy." in generate.render(text, page, results=tmp_path)
     with pytest.raises(generate.FigureError, match=re.escape("compare: the table 'plain' has no column P(X > Y)")):
         generate.render("<!-- intervals:compare plain --><!-- end intervals -->", page, results=tmp_path)
+    body["notes"]["results"]["rows"][0][2] = {"value": 0.5, "digits": 2}  # an estimate without its interval
+    path.write_text(json.dumps(body))
+    with pytest.raises(generate.FigureError, match=re.escape("an estimate of P(X > a) [95 % CI] without its interval")):
+        generate.render(text, page, results=tmp_path)
 
 
 @pytest.fixture(scope="module")
