@@ -249,13 +249,22 @@ def check_statically(words: list[str]) -> None:
                     assert (ROOT / part[index + 1]).is_file(), f"{shlex.join(part)}: no {part[index + 1]}"
         elif is_python(program) and part[1] == "-m":
             assert part[2] in ("venv", "pytest"), f"{shlex.join(part)}: which module?"
-            assert all((ROOT / word).exists() for word in part[3:] if not word.startswith("-") and part[2] == "pytest")
+            if part[2] == "pytest":
+                assert all((ROOT / word).exists() for word in pytest_paths(part[3:])), shlex.join(part)
         elif is_python(program):
             check_parses(part[1], placeholders_as_values(part[2:]))
         elif program == "ray":
             assert part[1] in ("start", "stop", "status"), shlex.join(part)
         elif program != "git":
             pytest.fail(f"{shlex.join(part)}: the suite cannot check this command; say how in tests/test_docs.py")
+
+
+PYTEST_VALUES = {"-n", "-k", "-m", "-p", "--durations"}  # the pytest options the docs give that take a value
+
+
+def pytest_paths(args: list[str]) -> list[str]:
+    """The paths among pytest's arguments: neither options nor their values."""
+    return [word for before, word in zip(["", *args], args) if not word.startswith("-") and before not in PYTEST_VALUES]
 
 
 def placeholders_as_values(args: list[str]) -> list[str]:
@@ -527,7 +536,7 @@ def test_readme_begins_with_the_two_commands():
     assert train[1][1:] == ["install", "-r", "requirements.txt"]
     assert tests[1][1:] == ["install", "-r", "requirements.txt"]
     assert Path(train[2][1]).name == "train_static.py"
-    assert len(tests) == 3 and tests[2][1:] == ["-m", "pytest", "tests", "-q"]
+    assert len(tests) == 3 and tests[2][1:] == ["-m", "pytest", "tests", "-q", "-n", "auto"]
 
 
 def test_flag_tables_match_the_parsers():
