@@ -4,7 +4,8 @@ benchmarks' records, and the campaign's results from its runs' files.
 
 A generated part sits between two markers, ``<!-- KIND:WORDS -->`` and ``<!-- end KIND -->``; ``MARKERS`` is the
 one table of the kinds, saying what each holds and which function renders it: ``generate_flags.py`` (the
-parsers), ``generate_records.py`` (benchmarks/results/) and ``generate_campaign.py`` (results/paper/). A marker
+parsers), ``generate_records.py`` (benchmarks/results/), ``generate_evaluations.py`` (a campaign run's evaluation)
+and ``generate_campaign.py`` (the rest of results/paper/). A marker
 quoted as inline code, in backticks, is an example, not a marker.
 
 ``python docs/generate.py`` rewrites the generated parts of every page (README.md, experiments/README.md and
@@ -31,6 +32,7 @@ for folder in (ROOT, ROOT / "benchmarks", ROOT / "docs"):
         sys.path.insert(0, str(folder))
 
 import generate_campaign as runs_files  # noqa: E402
+import generate_evaluations as evaluations  # noqa: E402
 import generate_flags as parsers  # noqa: E402
 import generate_records as records_files  # noqa: E402
 from generate_records import FigureError  # noqa: E402
@@ -41,7 +43,7 @@ class Where(NamedTuple):
 
     page: Path
     results: Path = records_files.records.RESULTS  # the benchmarks' records
-    runs: Path = runs_files.RUNS  # the campaign's run folders
+    runs: Path = evaluations.RUNS  # the campaign's run folders
 
 
 class Marker(NamedTuple):
@@ -86,36 +88,36 @@ MARKERS: dict[str, Marker] = {
         records_files.half_intervals(*words, where.page, where.results)),
     "result": Marker(
         "RUN [ENVIRONMENT]", (1, 2), "a campaign run's evaluation: mean ± std, episodes, generation, hours of "
-        "training and machines, linked to the file and the weights", one_run(runs_files.result),
-        pending=runs_files.PENDING),
+        "training and machines, linked to the file and the weights", one_run(evaluations.result),
+        pending=evaluations.PENDING),
     "headline": Marker(
         "RUN [ENVIRONMENT]", (1, 2), "a campaign run's evaluation in a few characters, for a table of results",
-        one_run(runs_files.headline), pending=runs_files.PENDING),
+        one_run(evaluations.headline), pending=evaluations.PENDING),
     "spread": Marker(
         "RUN [ENVIRONMENT]", (1, 2), "how a campaign run's evaluation returns spread: median, quartiles, lowest, "
-        "highest, episodes far below the mean", one_run(runs_files.spread), pending=runs_files.PENDING),
+        "highest, episodes far below the mean", one_run(evaluations.spread), pending=evaluations.PENDING),
     "best": Marker(
         "RUN [ENVIRONMENT]", (1, 2), "the evaluation of a campaign run's best centre, with the generation it scored "
-        "in and its training return", one_run(runs_files.best), pending=runs_files.PENDING),
+        "in and its training return", one_run(evaluations.best), pending=evaluations.PENDING),
     "lengths": Marker(
         "RUN [ENVIRONMENT]", (1, 2), "how long a campaign run's evaluation episodes lasted: all of one length, or "
         "how many last the longest and what they score, and the others' lengths and median return",
-        one_run(runs_files.lengths), pending=runs_files.PENDING),
+        one_run(evaluations.lengths), pending=evaluations.PENDING),
     "lowest": Marker(
         "RUN [ENVIRONMENT]", (1, 2), "a campaign run's lowest evaluation episode: its seed, its return and its "
-        "length", one_run(runs_files.lowest), pending=runs_files.PENDING),
+        "length", one_run(evaluations.lowest), pending=evaluations.PENDING),
     "first": Marker(
         "RUN [ENVIRONMENT]", (1, 2), "a campaign run's first evaluation episode, the one its frames.png shows: its "
-        "length and its return", one_run(runs_files.first), pending=runs_files.PENDING),
+        "length and its return", one_run(evaluations.first), pending=evaluations.PENDING),
     "forward": Marker(
         "RUN [ENVIRONMENT]", (1, 2), "how far a campaign run's ant walked toward +x in its evaluation, mean ± std",
-        one_run(runs_files.forward), pending=runs_files.PENDING),
+        one_run(evaluations.forward), pending=evaluations.PENDING),
     "curve": Marker(
         "RUN THRESHOLD [THRESHOLD ...]", tuple(range(2, 10)), "how an evaluated campaign run trained: the first "
         "generation its population's mean return passed each threshold, and the range of that mean and of the "
         "centre's training episodes over the last 50 generations",
         lambda words, where: runs_files.curve(words[0], words[1:], where.page, where.runs),
-        pending=runs_files.PENDING),
+        pending=evaluations.PENDING),
     "frames": Marker(
         "RUN", (1,), "a campaign run's frames.png, every 100th frame of its first evaluation episode",
         lambda words, where: runs_files.frames(words[0], where.page, where.runs), pending=runs_files.FRAMES_PENDING),
@@ -126,7 +128,7 @@ MARKERS: dict[str, Marker] = {
     "weight": Marker(
         "RUN", (1,), "what a campaign run adds to a clone: its checkpoint, committed by each chunk, then its final "
         "weights, evaluations and pictures, from the sizes of its files",
-        lambda words, where: runs_files.weight(words[0], where.page, where.runs), pending=runs_files.PENDING),
+        lambda words, where: runs_files.weight(words[0], where.page, where.runs), pending=evaluations.PENDING),
     "remaining": Marker(
         "", (0,), "the campaign's remaining runs and what they will cost, projected from its completed runs "
         "(experiments/cost.py)", lambda words, where: runs_files.remaining(where.page, where.runs), moving=True),

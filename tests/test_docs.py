@@ -786,19 +786,19 @@ def test_a_campaign_result_is_rendered_from_its_evaluation(evaluated_runs):
     marker = "<!-- lengths:carracing_hebbian_seed1 CarRacing-v3 -->{}<!-- end lengths -->"
     assert generate.render(marker.format("old"), page, runs=evaluated_runs) == marker.format(expected)
     made_up = {"steps": [1000, 150, 1000, 997, 400], "returns": [651.0, 79.25, 889.0, 514.0, 200.0]}
-    with mock.patch.object(generate.runs_files, "evaluation_of", return_value=(run, {}, made_up)):
-        assert generate.runs_files.lengths("x", None, page) == (
+    with mock.patch.object(generate.evaluations, "evaluation_of", return_value=(run, {}, made_up)):
+        assert generate.evaluations.lengths("x", None, page) == (
             "2 of its 5 episodes last 1000 steps, the longest, and score 651 to 889; the other 3 end at steps 150–997 "
             "(median 400), with a median return of 200")
         made_up["steps"][2] = 999
-        assert generate.runs_files.lengths("x", None, page) == "its 5 episodes end at steps 150–1000 (median 997)"
+        assert generate.evaluations.lengths("x", None, page) == "its 5 episodes end at steps 150–1000 (median 997)"
         made_up["steps"] = [3]
         with pytest.raises(generate.FigureError, match="1 episode lengths for 5 returns"):
-            generate.runs_files.lengths("x", None, page)
+            generate.evaluations.lengths("x", None, page)
     # an ant's forward distance; a run without one (CarRacing's) is refused, naming the file
     ant = {"forward_mean": 16.61, "forward_std": 0.767, "returns": [1.0], "steps": [1]}
-    with mock.patch.object(generate.runs_files, "evaluation_of", return_value=(run, {}, ant)):
-        assert generate.runs_files.forward("x", None, page) == "16.6 ± 0.767 m forward"
+    with mock.patch.object(generate.evaluations, "evaluation_of", return_value=(run, {}, ant)):
+        assert generate.evaluations.forward("x", None, page) == "16.6 ± 0.767 m forward"
     with pytest.raises(generate.FigureError, match="holds no forward distance"):
         generate.render("<!-- forward:carracing_hebbian_seed1 --><!-- end forward -->", page, runs=evaluated_runs)
     # the lowest episode: its seed as an offset from 2**31, its return and its length
@@ -844,20 +844,20 @@ def test_a_campaign_result_is_rendered_from_its_evaluation(evaluated_runs):
 
 def test_a_campaign_result_not_yet_evaluated_is_pending_and_a_late_page_is_behind(evaluated_runs, tmp_path):
     page = ROOT / "README.md"
-    pending = f"<!-- result:carracing_static_seed1 -->{generate.runs_files.PENDING}<!-- end result -->"
+    pending = f"<!-- result:carracing_static_seed1 -->{generate.evaluations.PENDING}<!-- end result -->"
     for kind in ("result", "spread", "best"):  # no such run
         marker = f"<!-- {kind}:carracing_static_seed1 -->x<!-- end {kind} -->"
         assert generate.render(marker, page, runs=evaluated_runs) == pending.replace("result", kind)
     shutil.copytree(evaluated_runs / "carracing_hebbian_seed1", tmp_path / "carracing_hebbian_seed1")
     (run,) = [path for path in (tmp_path / "carracing_hebbian_seed1").iterdir() if path.is_dir()]
     (run / "evaluation.json").rename(run / "later.json")  # trained, not yet evaluated
-    written = f"<!-- result:carracing_hebbian_seed1 -->{generate.runs_files.PENDING}<!-- end result -->"
+    written = f"<!-- result:carracing_hebbian_seed1 -->{generate.evaluations.PENDING}<!-- end result -->"
     assert generate.render(written, page, runs=tmp_path) == written
     (run / "later.json").rename(run / "evaluation.json")  # evaluated since the page was written
     behind = []
     assert generate.render(written, page, behind, runs=tmp_path) == written  # a check leaves it, and says so
     assert behind == ["carracing_hebbian_seed1"]
-    assert generate.runs_files.PENDING not in generate.render(written, page, runs=tmp_path)  # a rewrite fills it in
+    assert generate.evaluations.PENDING not in generate.render(written, page, runs=tmp_path)  # a rewrite fills it in
 
 
 def test_the_campaigns_remaining_runs_are_rendered_and_a_later_state_is_behind(evaluated_runs):
