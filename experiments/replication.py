@@ -7,7 +7,7 @@
 One row per claim of the paper: CarRacing, Hebbian against static; the quadruped on each body it trained on; on the
 body it never saw; and the Hebbian network's adaptation within an episode. Each row holds the figure cited for the
 paper (from secondary sources, unverified: docs/original.md), this tool's evidence, and a verdict decided by the rules
-below (``verdict_of``), with its reason in one sentence. Everything comes from files:
+of ``experiments/verdicts.py`` (``verdict_of``), with its reason in one sentence. Everything comes from files:
 
 - the campaign's reports (``experiments/paper.py EXPERIMENT report``, written by the campaign in
   ``results/paper/<experiment>_report/<environment>/``): the runs, the IQM and the mean of each kind with their 95 %
@@ -20,14 +20,6 @@ below (``verdict_of``), with its reason in one sentence. Everything comes from f
 - the comparison with the environment the original ran (``experiments/original_ant.py``'s records in
   ``results/original_ant/``).
 
-The verdict rules. A claim about two kinds ("X scores higher than Y") is *reproduced* where the lower end of P(X > Y)'s
-interval is above 0.5, *not reproduced* where its upper end is below 0.5, and *not yet decided* otherwise. A cited
-figure m ± s of one kind is *reproduced* where m lies within the interval of that kind's mean over runs, *not
-reproduced* where that interval does not meet [m - s, m + s], and *not yet decided* otherwise. The adaptation claim is
-*reproduced* where on every body most Hebbian runs walk from step 100 (``walks``), *not reproduced* where on some body
-most do not. Any claim is *not yet decided* with fewer than ``MIN_RUNS`` runs of a kind it needs; a row's verdict is
-*not reproduced* if any of its parts is, *reproduced* if all are.
-
 A run evaluated since the page was written makes ``--check`` say the page is behind (exit 0), as docs/generate.py
 does with the docs' campaign results: the campaign writes its files as it goes; ``python experiments/replication.py``
 catches the page up.
@@ -36,12 +28,9 @@ catches the page up.
 from __future__ import annotations
 
 import argparse
-import csv
-import json
 import os
 import re
 import sys
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -51,300 +40,37 @@ if str(ROOT) not in sys.path:  # run as a script
     sys.path.insert(0, str(ROOT))
 from experiments import stand  # noqa: E402  (after the repository's root is on the path)
 from experiments.pages import covered, runs_line, settle  # noqa: E402
+from experiments.replication_files import (  # noqa: E402
+    ReplicationError,
+    Report,
+    Run,
+    evaluated_runs,
+    hours,
+    read_json,
+    read_report,
+)
+from experiments.verdicts import (  # noqa: E402
+    ADAPTATION,
+    ALIVE_HEIGHT,
+    ANT_BODIES,
+    BODY_NAMES,
+    CLAIMS,
+    KIND_NAMES,
+    MIN_RUNS,
+    TRACE_EPISODES,
+    WALK_DISTANCE,
+    WALK_FROM,
+    WALK_UNTIL,
+    Claim,
+    Trace,
+    adaptation_verdict,
+    trace_run,
+    verdict_of,
+)
 
 RUNS = ROOT / "results" / "paper"
 PAGE_NAME = "REPLICATION.md"
 ORIGINAL_RECORDS = ROOT / "results" / "original_ant"
-EVALUATION, MADE_WITH = "evaluation.json", "made_with.json"
-
-MIN_RUNS = 3  # runs of each kind a claim needs before any verdict: one run cannot be told from its seed's luck
-REPRODUCED, NOT_REPRODUCED, UNDECIDED = "reproduced", "not reproduced", "not yet decided"
-# the adaptation row: "learns to walk ... in less than 100 timesteps" (the paper's abstract)
-WALK_FROM = 100  # the policy step by which the network is to walk
-WALK_UNTIL = 200  # ... judged over the steps that follow, up to this one
-WALK_DISTANCE = 0.5  # metres forward over those steps (the shipped Hebbian ant walks about 1.7 m per 100 steps)
-ALIVE_HEIGHT = 0.26  # metres: pyBullet's ant is alive while its torso is higher (a lower torso ends an episode)
-TRACE_EPISODES = 3  # episodes traced per run and body: the evaluation's first seeds
-ANT_BODIES = ("AntBulletEnv-v0", "AntAsymRightBulletEnv-v0", "AntAsymLeftBulletEnv-v0")
-BODY_NAMES = {"AntBulletEnv-v0": "standard", "AntAsymRightBulletEnv-v0": "right-damaged (seen)",
-              "AntAsymLeftBulletEnv-v0": "left-damaged (unseen)"}
-KIND_NAMES = {"static": "static", "hebbian": "Hebbian"}
-
-
-class ReplicationError(ValueError):
-    """A file of the campaign that cannot be read as a run or a report; names it."""
-
-
-# --- the claims ------------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Cited:
-    """A figure cited for the paper: one kind's mean ± spread."""
-    kind: str
-    mean: float
-    spread: float
-
-
-@dataclass(frozen=True)
-class Claim:
-    what: str  # the claim, in words
-    paper: str  # what is cited for the paper
-    experiment: str  # the campaign's experiment: its report is results/paper/<experiment>_report/<environment>/
-    environment: str
-    higher: tuple[str, str] | None = None  # (X, Y): the paper has X scoring higher than Y
-    cited: tuple[Cited, ...] = ()
-
-
-ANT_SEEN = (Cited("static", 1604, 171), Cited("hebbian", 1051, 113))
-CLAIMS = (
-    Claim("CarRacing: the Hebbian network drives better than the static one",
-          "Hebbian 872 ± 11, static 711 ± 16 (100 rollouts)", "carracing", "CarRacing-v3", ("hebbian", "static"),
-          (Cited("hebbian", 872, 11), Cited("static", 711, 16))),
-    Claim("The quadruped on its standard body (trained on): the static network walks further than the Hebbian one",
-          "static 1604 ± 171, Hebbian 1051 ± 113 (the source does not say which body it trained on)", "ant",
-          "AntBulletEnv-v0", ("static", "hebbian"), ANT_SEEN),
-    Claim("The quadruped on its right-damaged body (trained on): the static network walks further",
-          "the same figures, for a body trained on", "ant", "AntAsymRightBulletEnv-v0", ("static", "hebbian"),
-          ANT_SEEN),
-    Claim("The quadruped on its left-damaged body (never seen): the Hebbian network walks further than the static one",
-          "no figure cited; the Hebbian network better on this body only", "ant", "AntAsymLeftBulletEnv-v0",
-          ("hebbian", "static")),
-)
-ADAPTATION = ("Within an episode, the Hebbian network goes from random weights to walking in less than 100 steps, on "
-              "each body", "\"in less than 100 timesteps\" (abstract)")
-
-
-# --- the campaign's files ---------------------------------------------------------------------------------------
-
-
-def read_csv(path: Path) -> list[dict]:
-    try:
-        with path.open(newline="") as handle:
-            return list(csv.DictReader(handle))
-    except (OSError, csv.Error, UnicodeDecodeError) as error:
-        raise ReplicationError(f"{path}: unreadable ({error})") from None
-
-
-def read_json(path: Path) -> dict:
-    try:
-        value = json.loads(path.read_text())
-    except (OSError, ValueError) as error:
-        raise ReplicationError(f"{path}: unreadable ({error})") from None
-    if not isinstance(value, dict):
-        raise ReplicationError(f"{path}: not a JSON object")
-    return value
-
-
-@dataclass(frozen=True)
-class Group:
-    """One kind's line of a report's summary.csv."""
-    kind: str
-    runs: int
-    iqm: tuple[float, float, float]  # estimate, low, high
-    mean: tuple[float, float, float]
-
-
-@dataclass(frozen=True)
-class Report:
-    folder: Path
-    groups: dict[str, Group]
-    better: dict[tuple[str, str], tuple[float, float, float]]  # (X, Y) -> P(X > Y), low, high
-
-
-def read_report(runs: Path, experiment: str, environment: str) -> Report | None:
-    """The campaign's report of ``experiment`` on ``environment``; None where there is none yet."""
-    folder = runs / f"{experiment}_report" / environment
-    if not (folder / "summary.csv").is_file():
-        return None
-    try:
-        groups = {row["group"]: Group(row["group"], int(row["runs"]),
-                                      tuple(float(row[key]) for key in ("iqm", "iqm_low", "iqm_high")),
-                                      tuple(float(row[key]) for key in ("mean", "mean_low", "mean_high")))
-                  for row in read_csv(folder / "summary.csv")}
-        better = {(row["x"], row["y"]): tuple(float(row[key]) for key in ("probability", "low", "high"))
-                  for row in read_csv(folder / "improvement.csv")}
-    except (KeyError, ValueError) as error:
-        raise ReplicationError(f"{folder}: not a report of the campaign ({type(error).__name__}: {error})") from None
-    return Report(folder, groups, better)
-
-
-@dataclass(frozen=True)
-class Run:
-    """An evaluated run of the campaign: the newest run folder of ``results/paper/<experiment>_<kind>_seed<N>``."""
-    name: str  # the seed folder's: ant_hebbian_seed1
-    folder: Path
-    experiment: str
-    kind: str
-    seed: int
-    config: dict
-    evaluation: dict
-    made_with: dict | None
-
-    def metrics(self) -> list[dict]:
-        return read_csv(self.folder / "metrics.csv")
-
-
-SEED_FOLDER = re.compile(r"(?P<experiment>[a-z0-9]+)_(?P<kind>static|hebbian)_seed(?P<seed>\d+)")
-
-
-def evaluated_runs(runs: Path) -> list[Run]:
-    """The campaign's evaluated runs, by experiment, kind and seed."""
-    found = []
-    for seed_folder in sorted(runs.iterdir()) if runs.is_dir() else []:
-        match = SEED_FOLDER.fullmatch(seed_folder.name)
-        if not match or not seed_folder.is_dir():
-            continue
-        candidates = sorted(path for path in seed_folder.iterdir() if (path / "config.json").is_file())
-        if not candidates or not (candidates[-1] / EVALUATION).is_file():
-            continue
-        folder = candidates[-1]
-        made_with = read_json(folder / MADE_WITH) if (folder / MADE_WITH).is_file() else None
-        found.append(Run(seed_folder.name, folder, match["experiment"], match["kind"], int(match["seed"]),
-                         read_json(folder / "config.json"), read_json(folder / EVALUATION), made_with))
-    return sorted(found, key=lambda run: (run.experiment, run.kind != "hebbian", run.seed))
-
-
-# --- the verdicts --------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Verdict:
-    status: str
-    reason: str
-
-
-def too_few(report: Report, kinds: tuple[str, ...]) -> Verdict | None:
-    counts = {kind: report.groups[kind].runs if kind in report.groups else 0 for kind in kinds}
-    short = {kind: count for kind, count in counts.items() if count < MIN_RUNS}
-    if not short:
-        return None
-    named = ", ".join(f"{count} {KIND_NAMES[kind]} run{'s' * (count != 1)}" for kind, count in short.items())
-    return Verdict(UNDECIDED, f"{named} evaluated so far; a verdict needs at least {MIN_RUNS} runs of each kind, so "
-                              "that a seed's luck cannot decide it")
-
-
-def higher_verdict(report: Report, higher: tuple[str, str]) -> Verdict:
-    x, y = higher
-    probability, low, high = report.better[x, y]
-    said = f"P({KIND_NAMES[x]} > {KIND_NAMES[y]}) is {probability:.2f} [{low:.2f}, {high:.2f}]"
-    if low > 0.5:
-        return Verdict(REPRODUCED, f"{said}: the {KIND_NAMES[x]} runs score higher")
-    if high < 0.5:
-        return Verdict(NOT_REPRODUCED, f"{said}: the {KIND_NAMES[y]} runs score higher")
-    return Verdict(UNDECIDED, f"{said}; the interval holds 0.5, so the runs do not rank the kinds")
-
-
-def level_verdict(report: Report, cited: Cited) -> Verdict:
-    mean, low, high = report.groups[cited.kind].mean
-    said = (f"the {KIND_NAMES[cited.kind]} runs' mean {mean:.0f} [{low:.0f}, {high:.0f}] against the cited "
-            f"{cited.mean:.0f} ± {cited.spread:.0f}")
-    if low <= cited.mean <= high:
-        return Verdict(REPRODUCED, f"{said}: the cited figure lies within the interval")
-    if high < cited.mean - cited.spread or low > cited.mean + cited.spread:
-        return Verdict(NOT_REPRODUCED, f"{said}: the interval is {'below' if high < cited.mean else 'above'} it")
-    return Verdict(UNDECIDED, f"{said}: the interval reaches the cited range but not the figure")
-
-
-def combined(parts: list[Verdict]) -> Verdict:
-    """A row's verdict: not reproduced if any part is, reproduced if all are, else not yet decided; the reason of the
-    part that decides."""
-    for status in (NOT_REPRODUCED, UNDECIDED):
-        deciding = [part for part in parts if part.status == status]
-        if deciding:
-            return Verdict(status, "; ".join(part.reason for part in deciding))
-    return Verdict(REPRODUCED, "; ".join(part.reason for part in parts))
-
-
-def verdict_of(claim: Claim, report: Report | None) -> Verdict:
-    if report is None:
-        return Verdict(UNDECIDED, "no run of this experiment has been evaluated yet")
-    kinds = tuple(dict.fromkeys([*(claim.higher or ()), *(cited.kind for cited in claim.cited)]))
-    short = too_few(report, kinds)
-    if short is not None:
-        return short
-    parts = ([higher_verdict(report, claim.higher)] if claim.higher else []) + \
-            [level_verdict(report, cited) for cited in claim.cited]
-    return combined(parts)
-
-
-# --- the adaptation within an episode ------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Trace:
-    """One traced episode: how it went from step ``WALK_FROM`` on, and how far the weights had turned by then."""
-    seed: int
-    steps: int  # policy steps
-    forward: float  # metres walked forward over steps WALK_FROM + 1 to WALK_UNTIL
-    lowest: float  # the torso's lowest height over those steps (0 where the episode ended before WALK_UNTIL)
-    turned: float  # the lowest, over the layers, cosine between the weights after step WALK_FROM and at the end
-
-    @property
-    def walks(self) -> bool:
-        """Walking from step WALK_FROM: the torso up and going forward over the next hundred steps."""
-        return self.steps >= WALK_UNTIL and self.lowest > ALIVE_HEIGHT and self.forward >= WALK_DISTANCE
-
-
-def cosine(weights: list[np.ndarray], final: list[np.ndarray]) -> float:
-    """The lowest, over the layers, cosine between two sets of a network's weights (float64 sums)."""
-    return min(float(np.sum(w.astype(np.float64) * f) / (np.linalg.norm(w.astype(np.float64)) *
-                                                           np.linalg.norm(f.astype(np.float64))))
-               for w, f in zip(weights, final))
-
-
-def trace_run(run: Run) -> dict[str, list[Trace]]:
-    """Episodes of a Hebbian ant run's final weights on each body, at its evaluation's first seeds."""
-    from cli.config import TrainConfig
-    from envs import ProblemSpec, rollout
-    from envs.evaluation import track_torso
-    from es.files import load_dat
-    from es.runfolder import named_file
-
-    config = TrainConfig.from_dict(run.config, str(run.folder / "config.json"))
-    problem = ProblemSpec(ANT_BODIES, config.policy).build()
-    try:
-        policy = problem.policy
-        params = policy.load({policy.roles[0]: load_dat(run.folder / named_file("last", policy.roles[0]))})
-        traces = {}
-        for env, body in zip(problem.envs, ANT_BODIES):
-            tracker = track_torso(env)
-            traces[body] = []
-            for seed in range(int(run.evaluation["seed"]), int(run.evaluation["seed"]) + TRACE_EPISODES):
-                forward, heights, early = [], [], []
-
-                def observe(t, reward, state, info, tracker=tracker, forward=forward, heights=heights, early=early):
-                    forward.append(tracker.forward)
-                    heights.append(float(tracker.unwrapped.robot.body_real_xyz[2]))
-                    if t == WALK_FROM:
-                        early.extend(weights.copy() for weights in policy.layer_weights(state))
-
-                episode = rollout(tracker, policy, params, seed, observe)
-                steps = len(forward)
-                whole = steps >= WALK_UNTIL
-                traces[body].append(Trace(
-                    seed, steps, forward[WALK_UNTIL - 1] - forward[WALK_FROM - 1] if whole else 0.0,
-                    min(heights[WALK_FROM:WALK_UNTIL]) if whole else 0.0,
-                    cosine(early, policy.layer_weights(episode.state)) if early else 0.0))
-        return traces
-    finally:
-        problem.close()
-
-
-def adaptation_verdict(traces: dict[str, dict[str, list[Trace]]]) -> Verdict:
-    """``traces``: run -> body -> its episodes. A run walks on a body where most of its episodes walk."""
-    if len(traces) < MIN_RUNS:
-        count = len(traces)
-        return Verdict(UNDECIDED, f"{count} Hebbian run{'s' * (count != 1)} of the quadruped evaluated so far; a "
-                                  f"verdict needs at least {MIN_RUNS}")
-    failing = []
-    for body in ANT_BODIES:
-        walking = sum(2 * sum(trace.walks for trace in runs[body]) > len(runs[body]) for runs in traces.values())
-        if 2 * walking <= len(traces):
-            failing.append(f"on the {BODY_NAMES[body]} body {walking} of {len(traces)} runs walk from step {WALK_FROM}")
-    if failing:
-        return Verdict(NOT_REPRODUCED, "; ".join(failing))
-    return Verdict(REPRODUCED, f"on every body most runs walk from step {WALK_FROM}")
 
 
 # --- the page ------------------------------------------------------------------------------------------------
@@ -384,16 +110,6 @@ def adaptation_evidence(traces: dict[str, dict[str, list[Trace]]]) -> str:
                      f"weights at step {WALK_FROM} at cosine {turned:.2f} with their last (median)")
     runs = len(traces)
     return (f"{runs} run{'s' * (runs != 1)}, {TRACE_EPISODES} episodes per body: " + "; ".join(cells))
-
-
-def hours(run: Run) -> tuple[float, int, int]:
-    """Training time (hours of wall clock), environment steps and generations, from metrics.csv."""
-    rows = run.metrics()
-    try:
-        return (sum(float(row["seconds"]) for row in rows) / 3600, sum(int(row["env_steps"]) for row in rows),
-                len(rows))
-    except (KeyError, ValueError) as error:
-        raise ReplicationError(f"{run.folder / 'metrics.csv'}: unreadable ({type(error).__name__}: {error})") from None
 
 
 def runs_table(runs: list[Run], page: Path) -> list[str]:
@@ -532,7 +248,7 @@ def render(runs_root: Path = RUNS, records: Path = ORIGINAL_RECORDS) -> str:
         f"{WALK_FROM} where over steps {WALK_FROM + 1} to {WALK_UNTIL} the torso stays above {ALIVE_HEIGHT} m and "
         f"moves at least {WALK_DISTANCE} m forward; a run walks on a body where most of its episodes do, and the claim "
         "is reproduced where most runs walk on every body. The rules are code: "
-        "[experiments/replication.py](../../experiments/replication.py).", "",
+        "[experiments/verdicts.py](../../experiments/verdicts.py).", "",
         "## The runs", "",
         *runs_table(runs, page), "",
         runs_line(run.name for run in runs), "",

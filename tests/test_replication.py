@@ -1,6 +1,6 @@
 """The replication report (experiments/replication.py): results/paper/REPLICATION.md is what the campaign's files give
-(``--check``), its verdicts follow the rules its docstring states (exact cases at their boundaries), and ``--check``
-tells a page that is behind newly evaluated runs (exit 0) from one that differs otherwise (exit 1).
+(``--check``), its verdicts follow the rules experiments/verdicts.py states (exact cases at their boundaries), and
+``--check`` tells a page that is behind newly evaluated runs (exit 0) from one that differs otherwise (exit 1).
 """
 
 from pathlib import Path
@@ -8,14 +8,14 @@ from pathlib import Path
 import pytest
 
 from experiments import replication
-from experiments.replication import (
+from experiments.replication_files import Group, Report
+from experiments.verdicts import (
+    ANT_BODIES,
     NOT_REPRODUCED,
     REPRODUCED,
     UNDECIDED,
     Cited,
     Claim,
-    Group,
-    Report,
     Trace,
     adaptation_verdict,
     verdict_of,
@@ -73,7 +73,7 @@ def walking(walks: bool) -> Trace:
 
 
 def test_the_adaptation_claim_needs_most_runs_walking_from_step_100_on_every_body():
-    bodies = replication.ANT_BODIES
+    bodies = ANT_BODIES
 
     def runs(pattern: list[list[bool]]) -> dict:  # run -> body -> episodes
         return {f"run{i}": {body: [walking(walks) for walks in episodes] for body in bodies}
