@@ -39,6 +39,7 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:  # run as a script
     sys.path.insert(0, str(ROOT))
 from experiments import stand  # noqa: E402  (after the repository's root is on the path)
+from experiments.original_ant import paired_interval  # noqa: E402
 from experiments.pages import covered, runs_line, settle  # noqa: E402
 from experiments.replication_files import (  # noqa: E402
     ReplicationError,
@@ -204,13 +205,6 @@ def original_lines(records: Path, page: Path) -> list[str]:
 def seed_of(run: str) -> str:
     match = re.search(r"_seed(\d+)", run)
     return match[1] if match else "?"
-
-
-def paired_interval(differences: np.ndarray, resamples: int = 10_000, seed: int = 0) -> tuple[float, float]:
-    """A 95 % percentile bootstrap interval of the mean of paired differences (experiments/original_ant.py's)."""
-    rng = np.random.default_rng(seed)
-    means = differences[rng.integers(0, differences.size, (resamples, differences.size))].mean(axis=1)
-    return float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))
 
 
 def render(runs_root: Path = RUNS, records: Path = ORIGINAL_RECORDS) -> str:

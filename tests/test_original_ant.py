@@ -29,7 +29,8 @@ from tests.extras import need_module_level
 
 need_module_level("original")
 
-from experiments import original_ant  # noqa: E402
+from envs import damaged  # noqa: E402
+from experiments import original_ant, original_envs  # noqa: E402
 from tests.test_bullet_locomotion import AVX2_STOCK, cpu_flags  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -46,8 +47,8 @@ def comparisons(against: str) -> list[dict]:
     agents = [None, *(original_ant.load_agent(run) for run in RUNS.values())]
     stock = against == "port"
     seen = []
-    for body in original_ant.BODIES:
-        original, tool = original_ant.OriginalAnt(body), original_ant.ToolAnt(body, stock=stock)
+    for body in original_envs.BODIES:
+        original, tool = original_envs.OriginalAnt(body), original_envs.ToolAnt(body, stock=stock)
         try:
             for agent in agents:
                 comparison = original_ant.side_by_side(original, tool, SEED, STEPS, agent, np.random.default_rng(3))
@@ -75,11 +76,11 @@ def check_every_step(seen: list[dict]) -> None:
     # the comparisons reach the episodes' ends and the walking gait: the stop rule, done from step 202 on, and
     # the Hebbian agent walking forward on the bodies it trained on
     ends = {(entry["body"], entry["actions"]): entry for entry in seen}
-    for body in original_ant.BODIES:
+    for body in original_envs.BODIES:
         for actions in ("random", "static"):
             entry = ends[body, actions]
             assert entry["ends"][-1] and not any(entry["ends"][:-1]) and entry["steps"] >= 202, (body, actions)
-    for body in original_ant.BODIES[:2]:
+    for body in original_envs.BODIES[:2]:
         entry = ends[body, "hebbian"]
         assert entry["steps"] == STEPS and sum(entry["rewards"]) > 100, body
 
@@ -102,18 +103,18 @@ def test_the_batched_class_is_the_originals_at_every_step_with_an_avx2_cpus_code
 def test_the_damaged_bodies_load_their_files():
     """The original's damaged ants stand on their own legs: the files' shortened lower leg, nothing else changed."""
     firsts = {}
-    for body in original_ant.BODIES:
-        env = original_ant.OriginalAnt(body)
+    for body in original_envs.BODIES:
+        env = original_envs.OriginalAnt(body)
         try:
             env.reset(SEED)
             robot = env.unwrapped.robot
-            side = original_ant.damaged.BULLET_IDS.get(body)
-            expected = original_ant.damaged.bullet_xml(side) if side else "ant.xml"
+            side = damaged.BULLET_IDS.get(body)
+            expected = damaged.bullet_xml(side) if side else "ant.xml"
             assert robot.model_xml == str(expected)
             firsts[body] = np.array(robot.body_real_xyz)
         finally:
             env.close()
-    standard, right, left = (firsts[body] for body in original_ant.BODIES)
+    standard, right, left = (firsts[body] for body in original_envs.BODIES)
     assert not np.array_equal(standard, right) and not np.array_equal(standard, left)
 
 
