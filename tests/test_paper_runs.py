@@ -156,19 +156,19 @@ def avx512() -> bool:
 def one_of_each(runs: list[Path]) -> list[Path]:
     """Every labelled run (checked with its commit's code, on the CPUs its label names), and of each experiment,
     kind and variant the lowest seed that today's code made: the other seeds differ from it only by the seed."""
+    labelled = [run for run in runs if made_with(run) is not None]
     groups: dict[str, list[Path]] = {}
     for run in runs:
-        if made_with(run) is None:
+        if run not in labelled:
             groups.setdefault(run.parent.name.rsplit("_seed", 1)[0], []).append(run)
-    chosen = [min(group, key=lambda run: experiment_of(run)[2]) for group in groups.values()]
-    return sorted([*chosen, *(run for run in runs if made_with(run) is not None)])
+    return sorted([*(min(group, key=lambda run: experiment_of(run)[2]) for group in groups.values()), *labelled])
 
 
 def pytest_generate_tests(metafunc):
     """The committed runs trained again: every one with ``--every-run`` (CI's step 4, where numpy and OpenBLAS take
-    other code), else one of each experiment, kind and variant (a whole pass is more than half an hour on one
-    core, and grows with the campaign)."""
-    if metafunc.function.__name__ == "test_the_papers_command_gives_a_committed_runs_first_generations_again":
+    other code), else ``one_of_each`` (a whole pass is more than half an hour on one core, and grows with the
+    campaign)."""
+    if metafunc.definition.name == "test_the_papers_command_gives_a_committed_runs_first_generations_again":
         runs = RUNS if metafunc.config.getoption("every_run") else one_of_each(RUNS)
         metafunc.parametrize("run", runs, ids=[run_id(run) for run in runs])
 
